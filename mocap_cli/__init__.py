@@ -1,0 +1,1 @@
+"""The `mocap` command line: launcher, topic and node tools, offline commands."""

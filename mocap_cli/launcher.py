@@ -1,0 +1,249 @@
+"""`mocap launch`: every node as its own OS process, wired as the launch file says.
+
+1. Plan: resolve node kinds, validate their params, give each process a PUB endpoint, and for each
+   topic work out who publishes it and how many subscribers each publisher must see.
+2. Start: spawn ``python -m nodes.run SPEC`` per process. Each node reports "ready" over the
+   control socket once its XPUB has seen all its expected subscribers; when every node is ready the
+   sources get "start". No sleeps: a source cannot send before the graph is wired.
+3. Watch: a node that dies is restarted with exponential backoff (0.1 s doubling to 5 s; reset
+   after 10 s of good running) and the restart is logged. A source that exits 0 has finished.
+4. Stop on SIGINT/SIGTERM: SIGTERM to every node, SIGKILL to any still alive after 1.5 s, so the
+   whole graph is gone within 2 s. Nodes also get SIGTERM if the launcher itself is killed.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+
+import zmq
+
+from mocap_cli.graph_registry import registry_path, write_registry
+from mocap_cli.launch_file import LaunchError, LaunchFile
+from nodes.registry import UnknownKind, load_kind
+from nodes.runtime import DIAGNOSTICS
+from nodes.spec import NodeSpec
+
+log = logging.getLogger("mocap.launch")
+STOP_GRACE_S = 1.5
+BACKOFF_FIRST_S, BACKOFF_MAX_S, BACKOFF_RESET_S = 0.1, 5.0, 10.0
+
+
+@dataclass
+class Proc:
+    spec: NodeSpec
+    is_source: bool
+    respawn: bool
+    popen: subprocess.Popen | None = None
+    started_at: float = 0.0
+    restarts: int = 0
+    failures_in_row: int = 0
+    restart_at: float | None = None
+    ready: bool = False
+    finished: bool = False
+    identity: bytes | None = None
+    publishes: list[str] = field(default_factory=list)
+    subscribes: list[str] = field(default_factory=list)
+
+
+def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
+    """Turn a launch file into one NodeSpec per process, with endpoints and expected subscribers."""
+    procs: list[Proc] = []
+    port = lf.transport.base_port
+    for entry in lf.nodes:
+        try:
+            cls = load_kind(entry.kind)
+        except UnknownKind as e:
+            raise LaunchError(f"node {entry.id}: {e}") from None
+        try:
+            cls.Params.model_validate(entry.params)
+        except Exception as e:
+            raise LaunchError(f"node {entry.id} ({entry.kind}): bad params: {e}") from None
+        for k in range(entry.replicas):
+            pid = entry.id if entry.replicas == 1 else f"{entry.id}#{k}"
+            if entry.endpoint:
+                endpoint = entry.endpoint
+            elif lf.transport.kind == "tcp":
+                port += 1
+                endpoint = f"tcp://{lf.transport.host}:{port}"
+            else:
+                endpoint = f"ipc://{sock_dir}/{pid.replace('#', '-')}.pub"
+            spec = NodeSpec(id=pid, kind=entry.kind, graph=lf.name, params=entry.params, remaps=entry.remaps,
+                            namespace=lf.namespace, pub_endpoint=endpoint, control_endpoint=control_endpoint,
+                            replica=k, replicas=entry.replicas)
+            procs.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn,
+                              publishes=[spec.wire_topic(t) for t in cls.publishes] + [DIAGNOSTICS],
+                              subscribes=[spec.wire_topic(t) for t in cls.subscribes]))
+    for sub in procs:
+        for topic in sub.subscribes:
+            pubs = [p for p in procs if topic in p.publishes and p is not sub]
+            sub.spec.sub_endpoints[topic] = [p.spec.pub_endpoint for p in pubs]
+            for p in pubs:
+                p.spec.expected_subscribers[topic] = p.spec.expected_subscribers.get(topic, 0) + 1
+    unfed = sorted({(p.spec.id, t) for p in procs for t in p.subscribes if not p.spec.sub_endpoints[t]})
+    for node_id, topic in unfed:
+        log.warning("node %s subscribes to %s but no node in the graph publishes it", node_id, topic)
+    return procs
+
+
+class Launcher:
+    def __init__(self, lf: LaunchFile, launch_path: str = ""):
+        self.lf = lf
+        self.launch_path = launch_path
+        self.sock_dir = tempfile.mkdtemp(prefix=f"mocap-{lf.name[:20]}-", dir="/tmp")
+        if lf.transport.kind == "tcp":
+            self.control_endpoint = f"tcp://{lf.transport.host}:{lf.transport.base_port}"
+        else:
+            self.control_endpoint = f"ipc://{self.sock_dir}/control"
+        self.procs = plan(lf, self.sock_dir, self.control_endpoint)
+        self.zctx = zmq.Context()
+        self.control = self.zctx.socket(zmq.ROUTER)
+        self.control.setsockopt(zmq.LINGER, 0)
+        self.control.bind(self.control_endpoint)
+        self.graph_started = False
+        self.stop_requested = False
+        self.t0 = time.monotonic()
+        self.registry = registry_path(lf.name)
+
+    # -- processes -----------------------------------------------------------------------------------
+    def _spawn(self, p: Proc) -> None:
+        p.popen = subprocess.Popen([sys.executable, "-m", "nodes.run", p.spec.model_dump_json()],
+                                   stdin=subprocess.DEVNULL)
+        p.started_at = time.monotonic()
+        p.ready = False
+        p.identity = None
+
+    def _write_registry(self) -> None:
+        write_registry(self.lf.name, {
+            "name": self.lf.name, "launch_file": os.path.abspath(self.launch_path) if self.launch_path else "",
+            "launcher_pid": os.getpid(), "control": self.control_endpoint,
+            "nodes": [{"id": p.spec.id, "kind": p.spec.kind, "pid": p.popen.pid if p.popen else None,
+                       "endpoint": p.spec.pub_endpoint, "publishes": p.publishes, "subscribes": p.subscribes,
+                       "restarts": p.restarts} for p in self.procs],
+        })
+
+    def start(self) -> None:
+        for p in self.procs:
+            self._spawn(p)
+        self._write_registry()
+        log.info("graph %s: started %d node processes", self.lf.name, len(self.procs))
+
+    def _on_control(self) -> None:
+        while True:
+            try:
+                identity, verb, *rest = self.control.recv_multipart(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            except ValueError:
+                continue
+            if verb != b"ready" or not rest:
+                continue
+            node_id = rest[0].decode()
+            for p in self.procs:
+                if p.spec.id == node_id:
+                    p.ready, p.identity = True, identity
+                    if self.graph_started and p.is_source:
+                        self.control.send_multipart([identity, b"start"])
+            if not self.graph_started and all(p.ready or p.finished for p in self.procs):
+                self.graph_started = True
+                log.info("graph %s ready in %.0f ms: starting sources", self.lf.name,
+                         (time.monotonic() - self.t0) * 1000)
+                for p in self.procs:
+                    if p.is_source and p.identity:
+                        self.control.send_multipart([p.identity, b"start"])
+
+    def _watch(self, now: float) -> None:
+        for p in self.procs:
+            if p.popen is None:
+                if p.restart_at is not None and now >= p.restart_at:
+                    p.restart_at = None
+                    self._spawn(p)
+                    self._write_registry()
+                    log.warning("restarted node %s (restart #%d, pid %d)", p.spec.id, p.restarts, p.popen.pid)
+                continue
+            code = p.popen.poll()
+            if code is None:
+                continue
+            p.popen = None
+            if code == 0 and p.is_source:
+                p.finished = True
+                log.info("source %s finished", p.spec.id)
+                continue
+            if not p.respawn:
+                log.error("node %s exited with code %s; respawn is off", p.spec.id, code)
+                p.finished = True
+                continue
+            if now - p.started_at > BACKOFF_RESET_S:
+                p.failures_in_row = 0
+            delay = min(BACKOFF_FIRST_S * 2 ** p.failures_in_row, BACKOFF_MAX_S)
+            p.failures_in_row += 1
+            p.restarts += 1
+            p.restart_at = now + delay
+            how = f"signal {-code}" if code < 0 else f"code {code}"
+            log.warning("node %s died (%s); restarting in %.1f s", p.spec.id, how, delay)
+
+    def sources_done(self) -> bool:
+        sources = [p for p in self.procs if p.is_source]
+        return bool(sources) and all(p.finished for p in sources)
+
+    def run(self, duration_s: float | None = None, until_done: bool = False, drain_s: float = 1.0) -> int:
+        """Run until a signal, ``duration_s`` or (with ``until_done``) all sources finished + drain."""
+        def on_signal(signum, _frame):
+            self.stop_requested = True
+
+        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        done_at = None
+        try:
+            self.start()
+            poller = zmq.Poller()
+            poller.register(self.control, zmq.POLLIN)
+            while not self.stop_requested:
+                if poller.poll(50):
+                    self._on_control()
+                now = time.monotonic()
+                self._watch(now)
+                if duration_s is not None and now - self.t0 >= duration_s:
+                    break
+                if until_done and self.sources_done():
+                    done_at = done_at or now
+                    if now - done_at >= drain_s:  # let the last frames flow through the graph
+                        break
+        finally:
+            self.stop()
+            for s, h in old.items():
+                signal.signal(s, h)
+        return 0
+
+    def stop(self) -> None:
+        alive = [p.popen for p in self.procs if p.popen is not None and p.popen.poll() is None]
+        for popen in alive:
+            popen.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + STOP_GRACE_S
+        for popen in alive:
+            try:
+                popen.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("node pid %d ignored SIGTERM: killing it", popen.pid)
+                popen.kill()
+                popen.wait()
+        self.control.close(linger=0)
+        self.zctx.term()
+        self.registry.unlink(missing_ok=True)
+        shutil.rmtree(self.sock_dir, ignore_errors=True)
+        log.info("graph %s stopped", self.lf.name)
+
+    def status(self) -> list[dict]:
+        return [{"id": p.spec.id, "pid": p.popen.pid if p.popen else None, "restarts": p.restarts,
+                 "finished": p.finished} for p in self.procs]
+
+
+def dump_plan(lf: LaunchFile) -> str:
+    procs = plan(lf, "/tmp/mocap-plan", "ipc:///tmp/mocap-plan/control")
+    return json.dumps([p.spec.model_dump() for p in procs], indent=2)

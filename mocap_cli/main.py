@@ -1,0 +1,123 @@
+"""`mocap`: one entry point for the graph, its tools and the offline commands."""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from mocap_cli.graph_registry import NoGraph, find_graph, running_graphs
+from mocap_cli.launch_file import LaunchError, load_launch_file
+from nodes.runtime import configure_logging
+
+
+def cmd_launch(args) -> int:
+    from mocap_cli.launcher import Launcher, dump_plan
+
+    lf = load_launch_file(args.file, args.set or [])
+    if args.plan:
+        print(dump_plan(lf))
+        return 0
+    if args.name:
+        lf.name = args.name
+    if any(g["name"] == lf.name for g in running_graphs()):
+        raise LaunchError(f"a graph named {lf.name!r} is already running; stop it or pass --name")
+    return Launcher(lf, args.file).run(duration_s=args.duration, until_done=args.until_done)
+
+
+def cmd_topic(args) -> int:
+    from mocap_cli import topic_tools
+
+    graph = find_graph(args.graph)
+    if args.action == "list":
+        topic_tools.topic_list(graph)
+    elif args.action == "echo":
+        return topic_tools.topic_echo(graph, args.topic, args.once, args.timeout)
+    elif args.action == "hz":
+        topic_tools.topic_hz(graph, args.topic, args.window, args.duration)
+    return 0
+
+
+def cmd_node(args) -> int:
+    from mocap_cli import topic_tools
+
+    topic_tools.node_list(find_graph(args.graph), args.seconds)
+    return 0
+
+
+def cmd_schema(args) -> int:
+    from messages import json_schemas
+
+    schemas = json_schemas()
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        for name, schema in schemas.items():
+            (out / f"{name}.schema.json").write_text(json.dumps(schema, indent=2))
+        print(f"wrote {len(schemas)} schemas to {out}")
+    else:
+        print(json.dumps(schemas, indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="mocap", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING (default INFO)")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("launch", help="run a node graph from a launch file",
+                       description="Start every node of a launch file as its own process; Ctrl-C stops them all.")
+    s.add_argument("file", help="launch file (YAML), e.g. launch/studio.yaml")
+    s.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE",
+                   help="override a node param (repeatable), e.g. --set solver.solver=fabrik")
+    s.add_argument("--name", help="graph name (default: the launch file's name)")
+    s.add_argument("--duration", type=float, help="stop after this many seconds")
+    s.add_argument("--until-done", action="store_true", help="stop when every source has finished")
+    s.add_argument("--plan", action="store_true", help="print each process's spec (endpoints, wiring) and exit")
+    s.set_defaults(func=cmd_launch)
+
+    s = sub.add_parser("topic", help="inspect topics of a running graph")
+    s.add_argument("--graph", help="graph name, when several are running")
+    tsub = s.add_subparsers(dest="action", required=True)
+    tsub.add_parser("list", help="topics with their publishers and subscribers")
+    e = tsub.add_parser("echo", help="print decoded messages of a topic")
+    e.add_argument("topic")
+    e.add_argument("--once", action="store_true", help="print one message and exit")
+    e.add_argument("--timeout", type=float, help="give up after this many seconds")
+    h = tsub.add_parser("hz", help="measure a topic's rate")
+    h.add_argument("topic")
+    h.add_argument("--window", type=float, default=1.0, help="seconds per report (default 1)")
+    h.add_argument("--duration", type=float, help="stop after this many seconds")
+    s.set_defaults(func=cmd_topic)
+
+    s = sub.add_parser("node", help="nodes of a running graph, from their heartbeats")
+    s.add_argument("action", choices=["list"])
+    s.add_argument("--graph", help="graph name, when several are running")
+    s.add_argument("--seconds", type=float, default=1.5, help="how long to listen for heartbeats")
+    s.set_defaults(func=cmd_node)
+
+    s = sub.add_parser("schema", help="export the JSON Schema of every message")
+    s.add_argument("--out", help="directory to write <schema>.schema.json files (default: print)")
+    s.set_defaults(func=cmd_schema)
+
+    from mocap_cli import commands  # the offline commands register themselves here
+    commands.register(sub)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    configure_logging(args.log_level)
+    try:
+        return args.func(args) or 0
+    except (LaunchError, NoGraph) as e:
+        logging.getLogger("mocap").error("%s", e)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,34 @@
+"""Writes one CSV line per received message (frame, seq, publisher, latency): a test and debugging sink."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict
+
+from messages import Message
+from nodes.runtime import Node
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    path: str
+
+
+class FrameLog(Node):
+    kind = "frame_log"
+    Params = Params
+    subscribes = {"in": Message}  # any schema: the codec's check is relaxed for the base class
+
+    def setup(self):
+        Path(self.params.path).parent.mkdir(parents=True, exist_ok=True)
+        self.file = open(self.params.path, "w", buffering=1)
+        self.file.write("frame,seq,publisher,schema,latency_us\n")
+
+    def on_message(self, topic, msg):
+        latency_us = (time.time_ns() - msg.header.entry_time_ns) / 1e3 if msg.header.entry_time_ns else ""
+        h = msg.header
+        self.file.write(f"{h.frame},{h.seq},{h.publisher},{h.schema_name},{latency_us}\n")
+
+    def teardown(self):
+        self.file.close()

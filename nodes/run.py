@@ -1,0 +1,37 @@
+"""Process entry point of one node: ``python -m nodes.run '<NodeSpec JSON>'`` (the launcher's call)."""
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import sys
+
+from nodes.registry import load_kind
+from nodes.runtime import configure_logging, run_node
+from nodes.spec import NodeSpec
+
+
+def _die_with_parent() -> None:
+    """Linux: get SIGTERM if the launcher dies, even by SIGKILL, so no node is left behind."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+        if os.getppid() == 1:
+            sys.exit(0)
+    except OSError:
+        pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1:
+        print("usage: python -m nodes.run '<NodeSpec JSON>'  (normally started by `mocap launch`)", file=sys.stderr)
+        return 2
+    _die_with_parent()
+    spec = NodeSpec.model_validate_json(argv[0])
+    configure_logging(os.environ.get("MOCAP_LOG_LEVEL", "INFO"))
+    return run_node(spec, load_kind(spec.kind))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,358 @@
+"""The small runtime every node shares: typed params, typed pub/sub, heartbeat, clean shutdown.
+
+A node is a class with ``Params`` (a pydantic model), the topics it reads (``subscribes``) and
+writes (``publishes``), and handlers. The runtime owns the sockets and the loop:
+
+- one XPUB socket per node (bound at the endpoint the launcher chose) for every topic it writes and
+  for its heartbeat; XPUB lets it see its subscribers arrive, which is how the graph knows it is
+  wired before a source starts (no sleeps);
+- one SUB socket connected to every publisher of every topic it reads; frames are multipart
+  ``[topic, msgpack payload]``;
+- a malformed or foreign message is counted, logged with topic and reason, and skipped;
+- a 1 Hz :class:`~messages.Heartbeat` on ``diagnostics`` with rates, latency percentiles
+  (from the header's entry time), drops (sequence gaps per publisher) and error counts;
+- SIGINT/SIGTERM end the loop; sockets close with LINGER 0.
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import os
+import signal
+import time
+from typing import Any, ClassVar
+
+import numpy as np
+import zmq
+from pydantic import BaseModel, ConfigDict
+
+from messages import DecodeError, Heartbeat, Latency, Message, decode, encode
+from messages.codec import MAX_MESSAGE_BYTES
+from nodes.spec import NodeSpec
+
+HEARTBEAT_PERIOD_S = 1.0
+DIAGNOSTICS = "diagnostics"
+
+
+class NoParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Node:
+    """Base class of every node kind. Subclasses declare their contract as class attributes."""
+
+    kind: ClassVar[str] = ""
+    Params: ClassVar[type[BaseModel]] = NoParams
+    subscribes: ClassVar[dict[str, type[Message]]] = {}   # logical topic -> message type
+    publishes: ClassVar[dict[str, type[Message]]] = {}
+    is_source: ClassVar[bool] = False                     # sources wait for the launcher's "start"
+
+    def __init__(self, params: BaseModel, ctx: "NodeContext"):
+        self.params = params
+        self.ctx = ctx
+        self.log = ctx.log
+
+    def setup(self) -> None:
+        """Open files, build state. Called once before any message."""
+
+    def on_message(self, topic: str, msg: Message) -> None:
+        """Handle one decoded message of a logical topic."""
+
+    def tick(self) -> float | None:
+        """Sources: produce output. Return seconds until the next call, or None when finished."""
+        return None
+
+    def teardown(self) -> None:
+        """Close files. Called once on shutdown, also after an error."""
+
+
+class _TopicStats:
+    __slots__ = ("count", "window", "drops", "last_seq")
+
+    def __init__(self):
+        self.count = 0
+        self.window = collections.deque()   # receive/publish times over the last second
+        self.drops = 0
+        self.last_seq: dict[str, int] = {}
+
+    def rate(self, now: float) -> float:
+        while self.window and self.window[0] < now - 1.0:
+            self.window.popleft()
+        return float(len(self.window))
+
+
+class NodeContext:
+    """What a node sees of the transport: publish, its id, its logger, the clock."""
+
+    def __init__(self, spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None):
+        self.spec = spec
+        self.node_cls = node_cls
+        self.log = logging.getLogger(f"mocap.{spec.id}")
+        self.zctx = zctx or zmq.Context.instance()
+        self.publisher_id = spec.id
+        self._seq: dict[str, int] = collections.defaultdict(int)
+        self._pub_stats: dict[str, _TopicStats] = collections.defaultdict(_TopicStats)
+        self._sub_stats: dict[str, _TopicStats] = collections.defaultdict(_TopicStats)
+        self._latency_ns: list[int] = []
+        self.errors: collections.Counter[str] = collections.Counter()
+        self.last_error = ""
+        self._wire = {t: spec.wire_topic(t) for t in {**node_cls.subscribes, **node_cls.publishes}}
+        self._logical = {w: t for t, w in self._wire.items() if t in node_cls.subscribes}
+        self.pub: zmq.Socket | None = None
+        self.sub: zmq.Socket | None = None
+        self._subscriptions: collections.Counter[bytes] = collections.Counter()
+
+    # -- sockets ---------------------------------------------------------------------------------
+    def open(self) -> None:
+        spec = self.spec
+        if spec.pub_endpoint:
+            self.pub = self.zctx.socket(zmq.XPUB)
+            self.pub.setsockopt(zmq.XPUB_VERBOSE, 1)
+            self.pub.setsockopt(zmq.SNDHWM, spec.hwm)
+            self.pub.setsockopt(zmq.LINGER, 0)
+            self.pub.bind(spec.pub_endpoint)
+        self.sub = self.zctx.socket(zmq.SUB)
+        self.sub.setsockopt(zmq.RCVHWM, spec.hwm)
+        self.sub.setsockopt(zmq.LINGER, 0)
+        self.sub.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
+        for logical in self.node_cls.subscribes:
+            wire = self._wire[logical]
+            self.sub.setsockopt(zmq.SUBSCRIBE, wire.encode())
+            for endpoint in spec.sub_endpoints.get(wire, []):
+                self.sub.connect(endpoint)
+
+    def close(self) -> None:
+        for s in (self.pub, self.sub):
+            if s is not None:
+                s.close(linger=0)
+
+    def read_subscriptions(self) -> None:
+        """Drain XPUB subscription notices (b'\\x01topic' / b'\\x00topic')."""
+        while self.pub is not None:
+            try:
+                note = self.pub.recv(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            if note[:1] == b"\x01":
+                self._subscriptions[note[1:]] += 1
+            elif note[:1] == b"\x00":
+                self._subscriptions[note[1:]] -= 1
+
+    def subscribers_connected(self) -> bool:
+        return all(self._subscriptions[t.encode()] >= n for t, n in self.spec.expected_subscribers.items())
+
+    # -- publishing --------------------------------------------------------------------------------
+    def wire_topic(self, logical: str) -> str:
+        return self._wire.get(logical) or self.spec.wire_topic(logical)
+
+    def publish(self, topic: str, msg: Message, source: Message | None = None) -> None:
+        """Send ``msg`` on a logical topic. With ``source``, the frame number, capture time and
+        graph-entry time are carried over from the message this one was computed from."""
+        if self.pub is None:
+            return
+        h = msg.header
+        h.schema_name, h.version = msg.SCHEMA, msg.VERSION
+        if source is not None:
+            sh = source.header
+            h.frame, h.capture_time_s, h.entry_time_ns = sh.frame, sh.capture_time_s, sh.entry_time_ns
+        elif h.entry_time_ns == 0:
+            h.entry_time_ns = time.time_ns()
+        wire = self.wire_topic(topic)
+        self._seq[wire] += 1
+        h.seq, h.publisher = self._seq[wire], self.publisher_id
+        self.send_raw(wire, encode(msg))
+
+    def send_raw(self, wire_topic: str, payload: bytes) -> None:
+        try:
+            self.pub.send_multipart([wire_topic.encode(), payload], zmq.NOBLOCK, copy=False)
+        except zmq.Again:  # HWM reached on every peer: keep-last semantics, the frame is dropped
+            self.errors["send_dropped"] += 1
+            return
+        st = self._pub_stats[wire_topic]
+        st.count += 1
+        st.window.append(time.monotonic())
+
+    # -- receiving ---------------------------------------------------------------------------------
+    def receive(self, frames: list[bytes]) -> tuple[str, Message] | None:
+        """Decode one multipart frame into (logical topic, message); count and log failures."""
+        if len(frames) != 2:
+            self._error("bad_framing", f"expected [topic, payload], got {len(frames)} parts")
+            return None
+        wire = frames[0].decode("utf-8", "replace")
+        logical = self._logical.get(wire)
+        if logical is None:
+            return None  # a longer topic that shares our prefix; not ours
+        try:
+            msg = decode(frames[1], wire, self.node_cls.subscribes[logical])
+        except DecodeError as e:
+            self._error(f"decode_{e.kind}", str(e))
+            return None
+        if self.spec.replicas > 1 and msg.header.frame % self.spec.replicas != self.spec.replica:
+            return None  # a sibling replica's frame
+        st = self._sub_stats[wire]
+        st.count += 1
+        now = time.monotonic()
+        st.window.append(now)
+        h = msg.header
+        last = st.last_seq.get(h.publisher)
+        if last is not None and h.seq > last + 1:
+            st.drops += h.seq - last - 1
+        st.last_seq[h.publisher] = h.seq
+        if h.entry_time_ns:
+            self._latency_ns.append(time.time_ns() - h.entry_time_ns)
+        return logical, msg
+
+    def _error(self, reason: str, text: str) -> None:
+        self.errors[reason] += 1
+        self.last_error = text
+        # Log the first few of each kind in full, then every 1000th, so a flood cannot fill the disk.
+        n = self.errors[reason]
+        if n <= 5 or n % 1000 == 0:
+            self.log.warning("%s (%s #%d)", text, reason, n)
+
+    def handler_error(self, topic: str, exc: BaseException) -> None:
+        self._error(f"handler_{type(exc).__name__}", f"handler for {topic!r} failed: {exc!r}")
+
+    # -- heartbeat ---------------------------------------------------------------------------------
+    def heartbeat(self, state: str, started_at: float) -> Heartbeat:
+        now = time.monotonic()
+        lat = np.asarray(self._latency_ns, dtype=np.float64) / 1e6
+        self._latency_ns = []
+        latency = Latency()
+        if lat.size:
+            p50, p95, p99 = np.percentile(lat, [50, 95, 99])
+            latency = Latency(p50_ms=p50, p95_ms=p95, p99_ms=p99, max_ms=float(lat.max()), samples=int(lat.size))
+        rates = {t: s.rate(now) for t, s in {**self._sub_stats, **self._pub_stats}.items()}
+        return Heartbeat(
+            header=Heartbeat.make_header(entry_time_ns=time.time_ns()),
+            node=self.spec.id, kind=self.spec.kind, pid=os.getpid(), state=state,
+            uptime_s=now - started_at, rates_hz=rates,
+            received={t: s.count for t, s in self._sub_stats.items()},
+            published={t: s.count for t, s in self._pub_stats.items() if t != DIAGNOSTICS},
+            drops={t: s.drops for t, s in self._sub_stats.items()},
+            errors=dict(self.errors), latency=latency, last_error=self.last_error[:500],
+        )
+
+
+class _Stop(Exception):
+    pass
+
+
+def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None) -> int:
+    """Run one node until SIGINT/SIGTERM, or until a source finishes. Returns the exit code."""
+    params = node_cls.Params.model_validate(spec.params)
+    ctx = NodeContext(spec, node_cls, zctx)
+    stopping = False
+
+    def on_signal(signum, _frame):
+        nonlocal stopping
+        stopping = True
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+
+    ctx.open()
+    node = node_cls(params, ctx)
+    control = None
+    if spec.control_endpoint:
+        control = ctx.zctx.socket(zmq.DEALER)
+        control.setsockopt(zmq.LINGER, 0)
+        control.connect(spec.control_endpoint)
+    poller = zmq.Poller()
+    poller.register(ctx.sub, zmq.POLLIN)
+    if ctx.pub is not None:
+        poller.register(ctx.pub, zmq.POLLIN)
+    if control is not None:
+        poller.register(control, zmq.POLLIN)
+
+    started_at = time.monotonic()
+    next_heartbeat = started_at
+    ready_sent = False
+    started = control is None          # without a launcher, run at once
+    finished = False
+    next_tick = started_at
+    code = 0
+    try:
+        node.setup()
+        while not stopping:
+            now = time.monotonic()
+            if not ready_sent and control is not None:
+                ctx.read_subscriptions()
+                if ctx.subscribers_connected():
+                    control.send_multipart([b"ready", spec.id.encode()])
+                    ready_sent = True
+            if node_cls.is_source and started and not finished:
+                if now >= next_tick:
+                    try:
+                        delay = node.tick()
+                    except Exception as e:  # a source error ends the source, not silently
+                        ctx.handler_error("tick", e)
+                        raise
+                    if delay is None:
+                        finished = True
+                        ctx.log.info("source finished")
+                        break
+                    next_tick = max(next_tick + delay, now - 0.05)  # keep cadence, never race to catch up
+                wait_s = max(0.0, next_tick - time.monotonic())
+            else:
+                wait_s = 0.1
+            wait_s = min(wait_s, max(0.0, next_heartbeat - now), 0.1)
+            # zmq polls in whole milliseconds: spin the last millisecond for precise pacing.
+            events = dict(poller.poll(int(wait_s * 1000) if wait_s >= 0.002 else 0))
+            if ctx.sub in events:
+                for _ in range(1000):  # bounded batch so heartbeats and ticks still run under load
+                    try:
+                        frames = ctx.sub.recv_multipart(zmq.NOBLOCK)
+                    except zmq.Again:
+                        break
+                    got = ctx.receive(frames)
+                    if got is None:
+                        continue
+                    try:
+                        node.on_message(*got)
+                    except Exception as e:
+                        ctx.handler_error(got[0], e)
+            if ctx.pub is not None and ctx.pub in events:
+                ctx.read_subscriptions()
+            if control is not None and control in events:
+                try:
+                    while True:
+                        if control.recv_multipart(zmq.NOBLOCK)[0] == b"start":
+                            started = True
+                            next_tick = time.monotonic()
+                except zmq.Again:
+                    pass
+            if time.monotonic() >= next_heartbeat:
+                state = "running" if started else "waiting"
+                ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(state, started_at))))
+                next_heartbeat += HEARTBEAT_PERIOD_S
+    except Exception as e:
+        ctx.log.exception("node failed: %s", e)
+        code = 1
+    finally:
+        try:
+            node.teardown()
+        except Exception as e:
+            ctx.log.exception("teardown failed: %s", e)
+            code = 1
+        if ctx.pub is not None:
+            final = "finished" if finished else ("error" if code else "stopping")
+            ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(final, started_at))))
+        if control is not None:
+            control.close(linger=0)
+        ctx.close()
+    return code
+
+
+def _stamped(ctx: NodeContext, hb: Heartbeat) -> Heartbeat:
+    ctx._seq[DIAGNOSTICS] += 1
+    hb.header.seq, hb.header.publisher = ctx._seq[DIAGNOSTICS], ctx.publisher_id
+    return hb
+
+
+def configure_logging(level: str = "INFO") -> None:
+    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def params_of(node_cls: type[Node], overrides: dict[str, Any]) -> BaseModel:
+    return node_cls.Params.model_validate(overrides)

@@ -1,0 +1,29 @@
+"""What the launcher tells a node process: who it is, its params and its wiring (passed as JSON)."""
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+
+class NodeSpec(BaseModel):
+    id: str                                   # unique in the graph; replicas get "<id>#<k>"
+    kind: str
+    graph: str = "standalone"
+    params: dict[str, Any] = {}
+    remaps: dict[str, str] = {}               # logical topic -> topic on the wire
+    namespace: str = ""                       # prefix for every topic, e.g. "mocap/actor1"
+    pub_endpoint: str | None = None           # where this node's PUB socket binds
+    sub_endpoints: dict[str, list[str]] = {}  # wire topic -> publisher endpoints to connect
+    expected_subscribers: dict[str, int] = {} # wire topic -> subscriber count to wait for
+    control_endpoint: str | None = None       # the launcher's ROUTER socket (ready/start handshake)
+    replica: int = 0
+    replicas: int = 1
+    hwm: int = Field(1000, description="ZeroMQ high-water mark: queued messages per peer before drops")
+    curve: dict[str, str] | None = None       # reserved for CURVE key files (issue 10)
+
+    def wire_topic(self, logical: str) -> str:
+        topic = self.remaps.get(logical, logical)
+        if self.namespace and not topic.startswith("/") and logical not in self.remaps and topic != "diagnostics":
+            topic = f"{self.namespace.strip('/')}/{topic}"
+        return topic.lstrip("/")
