@@ -297,8 +297,11 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
             else:
                 wait_s = 0.1
             wait_s = min(wait_s, max(0.0, next_heartbeat - now), 0.1)
-            # zmq polls in whole milliseconds: spin the last millisecond for precise pacing.
-            events = dict(poller.poll(int(wait_s * 1000) if wait_s >= 0.002 else 0))
+            if wait_s < 0.001 and not node_cls.subscribes and ctx.pub is not None:
+                time.sleep(wait_s)  # a pure source: sub-millisecond pacing without spinning a core
+                wait_s = 0.0
+            # zmq polls in whole milliseconds; below one, poll without blocking.
+            events = dict(poller.poll(int(wait_s * 1000)))
             if ctx.sub in events:
                 for _ in range(1000):  # bounded batch so heartbeats and ticks still run under load
                     try:

@@ -23,7 +23,8 @@ class NodeSpec(BaseModel):
     curve: dict[str, str] | None = None       # reserved for CURVE key files (issue 10)
 
     def wire_topic(self, logical: str) -> str:
+        """Remap, then prefix the namespace unless the name is absolute ("/x") or ``diagnostics`` (as in ROS)."""
         topic = self.remaps.get(logical, logical)
-        if self.namespace and not topic.startswith("/") and logical not in self.remaps and topic != "diagnostics":
+        if self.namespace and not topic.startswith("/") and topic != "diagnostics":
             topic = f"{self.namespace.strip('/')}/{topic}"
         return topic.lstrip("/")

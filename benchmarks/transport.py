@@ -1,0 +1,129 @@
+"""Transport benchmark (issue 2): one-way latency through 1 and 5 relay hops with our runtime, next
+to a bare pyzmq PUB/SUB relay chain with the same hops, measured in the same run; and the codec's
+encode + decode + validate cost for a 35-marker frame.
+
+    python benchmarks/transport.py [--frames 2000] [--rate 500]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import multiprocessing as mp
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import zmq
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from messages import MarkerFrame, decode, encode  # noqa: E402
+from mocap_cli.launch_file import LaunchFile  # noqa: E402
+from mocap_cli.launcher import Launcher  # noqa: E402
+
+
+def runtime_chain(hops: int, frames: int, rate: float) -> np.ndarray:
+    out = Path(tempfile.mkdtemp()) / "frames.csv"
+    nodes = [{"id": "source", "kind": "synthetic_source", "params": {"rate_hz": rate, "frames": frames}}]
+    prev = "markers/raw"
+    for i in range(hops):
+        nodes.append({"id": f"relay{i}", "kind": "relay", "remaps": {"in": prev, "out": f"hop/{i}"}})
+        prev = f"hop/{i}"
+    nodes.append({"id": "sink", "kind": "frame_log", "params": {"path": str(out)}, "remaps": {"in": prev}})
+    lf = LaunchFile.model_validate({"name": f"bench-{hops}-{os.getpid()}", "nodes": nodes})
+    Launcher(lf).run(until_done=True, drain_s=0.5)
+    with open(out) as f:
+        return np.array([float(r["latency_us"]) for r in csv.DictReader(f)])
+
+
+def _bare_source(endpoint, frames, rate, ready):
+    ctx = zmq.Context()
+    s = ctx.socket(zmq.XPUB)
+    s.bind(endpoint)
+    s.recv()  # the first hop's subscription: wired, no sleep
+    ready.wait()
+    t0 = time.perf_counter()
+    for i in range(frames):
+        delay = t0 + i / rate - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        s.send_multipart([b"t", time.time_ns().to_bytes(8, "little") + bytes(700)])
+    s.send_multipart([b"t", b"END"])
+    time.sleep(0.2)
+
+
+def _bare_relay(src, dst):
+    ctx = zmq.Context()
+    i, o = ctx.socket(zmq.SUB), ctx.socket(zmq.XPUB)
+    o.bind(dst)
+    o.recv()
+    i.connect(src)
+    i.setsockopt(zmq.SUBSCRIBE, b"t")
+    while True:
+        parts = i.recv_multipart()
+        o.send_multipart(parts)
+        if parts[1] == b"END":
+            time.sleep(0.2)
+            return
+
+
+def bare_chain(hops: int, frames: int, rate: float) -> np.ndarray:
+    d = tempfile.mkdtemp()
+    eps = [f"ipc://{d}/{k}" for k in range(hops + 1)]
+    ready = mp.Event()
+    procs = [mp.Process(target=_bare_source, args=(eps[0], frames, rate, ready))]
+    procs += [mp.Process(target=_bare_relay, args=(eps[k], eps[k + 1])) for k in range(hops)]
+    for p in procs:
+        p.start()
+    ctx = zmq.Context()
+    sink = ctx.socket(zmq.SUB)
+    sink.connect(eps[-1])
+    sink.setsockopt(zmq.SUBSCRIBE, b"t")
+    time.sleep(0.5)  # benchmark only: let the chain subscribe before the source starts
+    ready.set()
+    lat = []
+    while True:
+        _, payload = sink.recv_multipart()
+        if payload == b"END":
+            break
+        lat.append((time.time_ns() - int.from_bytes(payload[:8], "little")) / 1e3)
+    for p in procs:
+        p.join()
+    return np.array(lat)
+
+
+def codec_cost(n: int = 20000) -> float:
+    msg = MarkerFrame(header=MarkerFrame.make_header(1, 0.0, 1), labels=[f"M{i:02d}" for i in range(35)],
+                      positions=np.random.rand(35, 3).astype(np.float32), flags=np.zeros(35, np.uint8))
+    for _ in range(1000):
+        decode(encode(msg), "t", MarkerFrame)
+    runs = []
+    for _ in range(5):
+        t = time.perf_counter()
+        for _ in range(n):
+            decode(encode(msg), "t", MarkerFrame)
+        runs.append((time.perf_counter() - t) / n * 1e6)
+    return min(runs)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=2000)
+    ap.add_argument("--rate", type=float, default=500.0)
+    args = ap.parse_args()
+    print(f"codec encode+decode+validate, 35-marker frame: {codec_cost():.1f} us (target <= 20 us)")
+    print(f"\n{'hops':>4} {'chain':<8} {'frames':>6} {'p50 us':>8} {'p99 us':>8} {'mean us':>8}")
+    for hops in (1, 5):
+        rt = runtime_chain(hops, args.frames, args.rate)
+        bare = bare_chain(hops, args.frames, args.rate)
+        for name, lat in (("runtime", rt), ("bare", bare)):
+            print(f"{hops:>4} {name:<8} {len(lat):>6} {np.percentile(lat, 50):>8.0f} {np.percentile(lat, 99):>8.0f} "
+                  f"{statistics.fmean(lat):>8.0f}")
+        print(f"     runtime/bare p50 ratio: {np.percentile(rt, 50) / np.percentile(bare, 50):.2f} (target <= 1.5)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,166 @@
+"""Marker-set profiles: map the landmarks that localization uses onto a recording's labels.
+
+A profile is a YAML file (see profiles/*.yaml and the README's "Writing a marker-set profile"):
+
+```yaml
+name: cmu41
+description: CMU 41-marker Vicon set
+up_axis: z              # the recording's vertical axis (x, y or z); outputs use it
+strip_prefixes: true    # "male:LFWT" -> "LFWT" (actor/subject prefixes)
+landmarks:              # PAF landmark -> one label, or mean(A, B, ...)
+  SACR: mean(LBWT, RBWT)
+  L_IAS: LFWT
+body:                   # measurements the fallbacks need (defaults shown)
+  height_cm: null       # null = estimate from the markers
+  elbow_width_mm: 70
+```
+
+Resolving a profile against a label list gives a :class:`LandmarkMap`, which turns a marker array
+(frames x labels x 3) into landmark positions (frames x landmarks x 3) with one gather.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+SIDES = ("L", "R")
+_SIDED = ("SAE", "HLE", "HME", "UOA", "RSP", "USP", "HM2", "PAS", "FLE", "FME", "TTC", "FAL", "TAM", "FCC", "FM2",
+          "HEAD")
+LANDMARKS: tuple[str, ...] = ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "SGL") + tuple(
+    f"{side}_{name}" for name in _SIDED for side in SIDES)
+LANDMARK_INDEX = {name: i for i, name in enumerate(LANDMARKS)}
+PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
+_MEAN = re.compile(r"^mean\((.*)\)$")
+
+
+class ProfileError(Exception):
+    pass
+
+
+class BodyMeasurements(BaseModel):
+    """Subject measurements; None means "estimate from the markers" (facts 7.3)."""
+
+    model_config = ConfigDict(extra="forbid")
+    height_cm: float | None = Field(None, gt=50, lt=250)
+    mass_kg: float | None = Field(None, gt=10, lt=300)
+    marker_diameter_mm: float = Field(14.0, gt=0, lt=50)
+    elbow_width_mm: float = Field(70.0, gt=0, lt=200)
+    knee_width_mm: float = Field(100.0, gt=0, lt=250)
+    ankle_width_mm: float = Field(70.0, gt=0, lt=200)
+
+
+class Profile(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    description: str = ""
+    up_axis: Literal["x", "y", "z"] = "z"
+    strip_prefixes: bool = True
+    landmarks: dict[str, str]
+    body: BodyMeasurements = BodyMeasurements()
+    source_file: str = ""
+    lines: dict[str, int] = {}  # landmark -> line in the YAML file, for error messages
+
+    def where(self, landmark: str | None = None) -> str:
+        line = self.lines.get(landmark) if landmark else None
+        return f"profile {Path(self.source_file).name or self.name}" + (f" line {line}" if line else "")
+
+    def resolve(self, labels: list[str]) -> "LandmarkMap":
+        clean = [strip_prefix(x) if self.strip_prefixes else x for x in labels]
+        index = {label: i for i, label in enumerate(clean)}
+        rows = []
+        for landmark, expr in self.landmarks.items():
+            names = parse_expression(expr, self.where(landmark))
+            missing = [n for n in names if n not in index]
+            if missing:
+                shown = ", ".join(clean[:60]) + (" ..." if len(clean) > 60 else "")
+                raise ProfileError(f"{self.where(landmark)}: label {missing[0]} of {landmark} is not in the "
+                                   f"recording (labels: {shown})")
+            rows.append((LANDMARK_INDEX[landmark], [index[n] for n in names]))
+        return LandmarkMap.build(rows, n_labels=len(labels))
+
+
+def strip_prefix(label: str) -> str:
+    return label.rsplit(":", 1)[-1].strip()
+
+
+def parse_expression(expr: str, where: str) -> list[str]:
+    expr = str(expr).strip()
+    m = _MEAN.match(expr)
+    names = [n.strip() for n in m.group(1).split(",")] if m else [expr]
+    if not all(names) or any(re.search(r"[(),]", n) for n in names):
+        raise ProfileError(f"{where}: bad expression {expr!r}: use one label or mean(A, B, ...)")
+    return names
+
+
+@dataclass
+class LandmarkMap:
+    """Landmark i = mean of markers idx[i, :count[i]]; landmarks the profile lacks stay NaN."""
+
+    idx: np.ndarray     # (n_landmarks, k) int; padding points at the all-zero row appended at n_labels
+    count: np.ndarray   # (n_landmarks,) float; 0 for an absent landmark
+    n_labels: int
+
+    @classmethod
+    def build(cls, rows: list[tuple[int, list[int]]], n_labels: int) -> "LandmarkMap":
+        k = max((len(r) for _, r in rows), default=1)
+        idx = np.full((len(LANDMARKS), k), n_labels, np.int64)
+        count = np.zeros(len(LANDMARKS))
+        for li, markers in rows:
+            idx[li, : len(markers)] = markers
+            count[li] = len(markers)
+        return cls(idx, count, n_labels)
+
+    def present(self) -> set[str]:
+        return {LANDMARKS[i] for i in np.flatnonzero(self.count)}
+
+    def apply(self, markers: np.ndarray) -> np.ndarray:
+        """markers (..., n_labels, 3) -> landmarks (..., n_landmarks, 3), float64."""
+        if markers.shape[-2] != self.n_labels:
+            raise ProfileError(f"frame has {markers.shape[-2]} markers, the profile was resolved for {self.n_labels}")
+        pad = np.zeros(markers.shape[:-2] + (1, 3))
+        m = np.concatenate([markers.astype(np.float64, copy=False), pad], axis=-2)
+        summed = m[..., self.idx, :].sum(axis=-2)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = summed / self.count[:, None]
+        out[..., self.count == 0, :] = np.nan
+        return out
+
+
+def load_profile(name_or_path: str | Path) -> Profile:
+    """A profile by path, or by name from the repository's profiles/ folder."""
+    path = Path(name_or_path)
+    if not path.exists() and not path.suffix:
+        path = PROFILE_DIR / f"{name_or_path}.yaml"
+    if not path.exists():
+        known = ", ".join(sorted(p.stem for p in PROFILE_DIR.glob("*.yaml")))
+        raise ProfileError(f"profile {name_or_path!r} not found (shipped profiles: {known})")
+    text = path.read_text()
+    try:
+        raw = yaml.safe_load(text)
+        node = yaml.compose(text)
+    except yaml.YAMLError as e:
+        raise ProfileError(f"profile {path.name}: not valid YAML ({e})") from None
+    if not isinstance(raw, dict):
+        raise ProfileError(f"profile {path.name}: expected a mapping with name and landmarks")
+    lines = {}
+    for key, value in node.value:
+        if key.value == "landmarks" and isinstance(value, yaml.MappingNode):
+            lines = {k.value: k.start_mark.line + 1 for k, _ in value.value}
+    raw.setdefault("name", path.stem)
+    try:
+        profile = Profile.model_validate({**raw, "source_file": str(path), "lines": lines})
+    except ValidationError as e:
+        err = e.errors()[0]
+        raise ProfileError(f"profile {path.name}: {'.'.join(map(str, err['loc']))}: {err['msg']}") from None
+    for landmark, expr in profile.landmarks.items():
+        if landmark not in LANDMARK_INDEX:
+            raise ProfileError(f"{profile.where(landmark)}: unknown landmark {landmark!r} "
+                               f"(landmarks: {', '.join(LANDMARKS)})")
+        parse_expression(expr, profile.where(landmark))
+    return profile

@@ -1,0 +1,110 @@
+"""Shared test helpers: real launcher processes with their own registry dir, always cleaned up."""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data"
+
+
+def data_file(name: str) -> Path:
+    """A recording from ../shared/data; a missing file fails the test loudly (never a skip)."""
+    path = DATA / name
+    if not path.exists():
+        pytest.fail(f"test recording {path} is missing: tests read the real recordings from ../shared/data")
+    return path
+
+
+def wait_for(predicate, timeout_s: float = 10.0, what: str = "condition"):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.02)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie is dead for our purposes
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(") ", 1)[1][0] != "Z"
+    except OSError:
+        return False
+
+
+class Graph:
+    def __init__(self, proc: subprocess.Popen, run_dir: Path, name: str, log_path: Path):
+        self.proc, self.run_dir, self.name, self.log_path = proc, run_dir, name, log_path
+
+    @property
+    def registry_file(self) -> Path:
+        return self.run_dir / f"{self.name}.graph.json"
+
+    def registry(self) -> dict:
+        return json.loads(self.registry_file.read_text())
+
+    def node_pids(self) -> dict[str, int]:
+        return {n["id"]: n["pid"] for n in self.registry()["nodes"] if n["pid"]}
+
+    def log(self) -> str:
+        return self.log_path.read_text()
+
+    def cli(self, *args: str, timeout: float = 30) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "mocap_cli.main", *args], cwd=REPO, env=self.env(),
+                              capture_output=True, text=True, timeout=timeout)
+
+    def env(self) -> dict:
+        return {**os.environ, "MOCAP_RUN_DIR": str(self.run_dir)}
+
+    def stop(self, timeout: float = 5.0) -> float:
+        t = time.monotonic()
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            self.proc.wait(timeout=timeout)
+        return time.monotonic() - t
+
+
+@contextlib.contextmanager
+def launched(tmp_path: Path, launch_text: str, *extra: str, name: str = "g"):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir(exist_ok=True)
+    launch = tmp_path / f"{name}.yaml"
+    launch.write_text(launch_text)
+    log_path = tmp_path / f"{name}.log"
+    env = {**os.environ, "MOCAP_RUN_DIR": str(run_dir)}
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "launch", str(launch), "--name", name, *extra],
+                                cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT)
+    graph = Graph(proc, run_dir, name, log_path)
+    try:
+        wait_for(lambda: graph.registry_file.exists() or proc.poll() is not None, 20, "the graph registry")
+        yield graph
+    finally:
+        pids = []
+        with contextlib.suppress(Exception):
+            pids = list(graph.node_pids().values())
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        for pid in pids:  # never leave a stray node behind, whatever the test did
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)

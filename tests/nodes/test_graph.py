@@ -1,0 +1,119 @@
+"""Real processes over real sockets: the launcher, readiness, restarts, shutdown, bad input."""
+import csv
+import os
+import signal
+import time
+
+from tests.conftest import launched, pid_alive, wait_for
+
+SMOKE = """
+nodes:
+  - id: source
+    kind: synthetic_source
+    params: {{rate_hz: {rate}, frames: {frames}}}
+  - id: relay
+    kind: relay
+    remaps: {{in: markers/raw, out: markers/relayed}}
+  - id: log
+    kind: frame_log
+    params: {{path: {log}}}
+    remaps: {{in: markers/relayed}}
+"""
+
+
+def read_frames(path):
+    with open(path) as f:
+        return [int(r["frame"]) for r in csv.DictReader(f)]
+
+
+def test_graph_delivers_every_frame_after_readiness(tmp_path):
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, SMOKE.format(rate=500, frames=300, log=out), "--until-done") as g:
+        g.proc.wait(timeout=30)
+        assert g.proc.returncode == 0, g.log()
+    assert read_frames(out) == list(range(300)), "frames lost or reordered"
+    assert "ready in" in g.log()
+
+
+def test_killed_node_is_restarted_and_graph_resumes(tmp_path):
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, SMOKE.format(rate=200, frames=0, log=out)) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 20, 15, "frames through the graph")
+        old = g.node_pids()["relay"]
+        os.kill(old, signal.SIGKILL)
+        new = wait_for(lambda: (p := g.node_pids().get("relay")) != old and p, 5, "a restarted relay")
+        assert pid_alive(new)
+        n = len(read_frames(out))
+        wait_for(lambda: len(read_frames(out)) > n + 20, 5, "frames after the restart")
+        assert "restarted node relay" in g.log()
+
+
+def test_ctrl_c_stops_everything_within_two_seconds(tmp_path):
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, SMOKE.format(rate=200, frames=0, log=out)) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 5, 15, "frames through the graph")
+        pids = list(g.node_pids().values())
+        assert len(pids) == 3 and all(pid_alive(p) for p in pids)
+        took = g.stop()
+        assert took < 2.0, f"graph took {took:.2f} s to stop"
+        assert not any(pid_alive(p) for p in pids), "a node process was left behind"
+        assert not g.registry_file.exists()
+
+
+def test_malformed_messages_are_counted_and_skipped(tmp_path):
+    out = tmp_path / "frames.csv"
+    graph = f"""
+nodes:
+  - id: bad
+    kind: tests.fixtures_nodes.garbage_source:GarbageSource
+    params: {{frames: 80}}
+  - id: relay
+    kind: relay
+    remaps: {{in: markers/raw, out: markers/relayed}}
+  - id: log
+    kind: frame_log
+    params: {{path: {out}}}
+    remaps: {{in: markers/relayed}}
+"""
+    with launched(tmp_path, graph) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) >= 80, 15, "all valid frames")
+        nodes = g.cli("node", "list", "--seconds", "1.5")
+        assert nodes.returncode == 0, nodes.stderr
+        relay = next(line for line in nodes.stdout.splitlines() if line.startswith("relay"))
+        assert int(relay.split()[-1]) >= 60, relay  # errors column: every bad message counted
+        assert g.proc.poll() is None and pid_alive(g.node_pids()["relay"])
+    assert read_frames(out) == list(range(80))
+    log = g.log()
+    assert "not msgpack" in log and "no header map" in log and "on a topic of mocap.MarkerFrame" in log
+    assert "topic 'markers/raw'" in log
+
+
+def test_topic_tools_against_running_graph(tmp_path):
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, SMOKE.format(rate=100, frames=0, log=out)) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 5, 15, "frames")
+        lst = g.cli("topic", "list")
+        assert lst.returncode == 0, lst.stderr
+        assert "markers/relayed" in lst.stdout and "publishers: relay" in lst.stdout
+        echo = g.cli("topic", "echo", "markers/relayed", "--once", "--timeout", "5")
+        assert echo.returncode == 0, echo.stderr
+        assert "mocap.MarkerFrame" in echo.stdout and "positions: float32[35, 3]" in echo.stdout
+        hz = g.cli("topic", "hz", "markers/raw", "--duration", "2.2")
+        rates = [float(line.split()[1]) for line in hz.stdout.splitlines() if line.startswith("markers/raw:")]
+        assert rates and 80 <= rates[-1] <= 120, hz.stdout
+        missing = g.cli("topic", "echo", "no/such/topic", "--once")
+        assert missing.returncode != 0 and "no node of graph" in missing.stderr
+
+
+def test_bad_launch_file_gives_clear_error(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("nodes:\n  - id: x\n    kind: no_such_kind\n")
+    from tests.conftest import REPO
+    import subprocess, sys
+    r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "launch", str(bad)], cwd=REPO,
+                       capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2 and "unknown node kind 'no_such_kind'" in r.stderr
+    bad.write_text("nodes:\n  - id: x\n    kind: synthetic_source\n    params: {rate_hz: -1}\n")
+    r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "launch", str(bad)], cwd=REPO,
+                       capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2 and "bad params" in r.stderr
