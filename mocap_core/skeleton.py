@@ -2,11 +2,13 @@
 
 Joints are listed in pre-order (parents before children); this is the "model order" of every
 array, CSV and message. Each joint is named after the proximal end of its bone, as in the thesis:
-``elbow_l`` is the elbow centre and also the forearm that starts there. End sites (``head_top``,
-``finger_*``, ``toe_*``) have a position but no bone of their own.
+``elbow_l`` is the elbow centre and also the forearm that starts there.
 
 Bone axes (facts 2.1, our convention for every bone): local +y runs along the bone toward its
-child, local +z points to the subject's front, x completes a right-handed frame.
+child, local +z points to the subject's front (for the foot: up), x = y cross z completes a
+right-handed frame (so x is the subject's left on the spine and the subject's right on the limbs).
+End sites (``head_top``, ``hand_*`` at the second metacarpal head, ``toe_*``) close their chains;
+they carry their parent's orientation.
 """
 from __future__ import annotations
 
@@ -30,7 +32,6 @@ for _s in ("l", "r"):
         (f"elbow_{_s}", f"shoulder_{_s}"),
         (f"wrist_{_s}", f"elbow_{_s}"),
         (f"hand_{_s}", f"wrist_{_s}"),
-        (f"finger_{_s}", f"hand_{_s}"),
     ]
 for _s in ("l", "r"):
     _TREE += [
@@ -45,14 +46,14 @@ JOINTS: tuple[str, ...] = tuple(name for name, _ in _TREE)
 PARENT: dict[str, str | None] = dict(_TREE)
 INDEX: dict[str, int] = {name: i for i, name in enumerate(JOINTS)}
 PARENT_INDEX = np.array([-1 if p is None else INDEX[p] for _, p in _TREE], dtype=np.int64)
-END_SITES = frozenset({"head_top", "finger_l", "finger_r", "toe_l", "toe_r"})
+END_SITES = frozenset({"head_top", "hand_l", "hand_r", "toe_l", "toe_r"})
 N_JOINTS = len(JOINTS)
 
 # The IK stages of the graph: the torso first, then the four limbs in parallel (DESIGN).
 LIMBS: dict[str, tuple[str, ...]] = {
     "torso": ("pelvis", "spine0", "spine1", "spine3", "neck", "head", "head_top"),
-    "left_arm": ("clavicle_l", "shoulder_l", "elbow_l", "wrist_l", "hand_l", "finger_l"),
-    "right_arm": ("clavicle_r", "shoulder_r", "elbow_r", "wrist_r", "hand_r", "finger_r"),
+    "left_arm": ("clavicle_l", "shoulder_l", "elbow_l", "wrist_l", "hand_l"),
+    "right_arm": ("clavicle_r", "shoulder_r", "elbow_r", "wrist_r", "hand_r"),
     "left_leg": ("hip_l", "knee_l", "ankle_l", "foot_l", "toe_l"),
     "right_leg": ("hip_r", "knee_r", "ankle_r", "foot_r", "toe_r"),
 }
