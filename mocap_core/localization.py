@@ -98,19 +98,32 @@ def _where_ok(value: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return _first(value, fallback)
 
 
-def _bend_axis(proximal: np.ndarray, distal: np.ndarray, sign: float, lateral_hint: np.ndarray) -> np.ndarray:
+def _bend_axis(proximal: np.ndarray, distal: np.ndarray, sign: float, medial_hint: np.ndarray) -> np.ndarray:
     """Unit medial direction of a hinge joint (elbow, knee), perpendicular to the proximal segment.
 
     Bent: the flexion axis (proximal x distal), signed so it points medially. Nearly straight: the
-    trunk's lateral axis (``lateral_hint``, already pointing medially) projected off the segment."""
+    trunk's lateral axis (``medial_hint``, already pointing medially) projected off the segment."""
     flex = cross(proximal, distal)
     with np.errstate(invalid="ignore", divide="ignore"):
         sin = norm(flex) / (norm(proximal) * norm(distal))
     w = np.clip((sin - STRAIGHT_SIN) / 0.25, 0.0, 1.0)[..., None]
     flex_dir = normalize(flex) * sign
-    hint = normalize(reject(lateral_hint, normalize(proximal)))
+    hint = normalize(reject(medial_hint, normalize(proximal)))
     flex_dir = np.where(np.isnan(flex_dir), 0.0, flex_dir)
     return normalize(w * flex_dir + (1 - w) * hint)
+
+
+def _hinge_from_lateral(parent: np.ndarray, lateral: np.ndarray, distal: np.ndarray, sign: float,
+                        medial_hint: np.ndarray, offset_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Joint centre = lateral marker + offset along the medial axis (Plug-in Gait's idea).
+
+    The axis must be perpendicular to the parent->joint line, which passes through the unknown
+    centre, not through the marker: two fixed-point steps settle it (like PiG's chord function)."""
+    centre = lateral
+    for _ in range(3):
+        medial = _bend_axis(centre - parent, distal - centre, sign, medial_hint)
+        centre = lateral + offset_m * medial
+    return centre, medial
 
 
 def _knee_regression(fle, fal, ttc, sign_e2):
@@ -231,9 +244,9 @@ class Localizer:
             hle, hme, rsp, usp = L[f"{S}_HLE"], L[f"{S}_HME"], L[f"{S}_RSP"], L[f"{S}_USP"]
             wrist = mid(rsp, usp)
             medial_hint = -c_left if s == "l" else c_left
-            medial = _where_ok(normalize(hme - hle),
-                               _bend_axis(hle - shoulder[s], wrist - hle, sign, medial_hint))
-            elbow = _where_ok(mid(hle, hme), hle + elbow_offset * medial)
+            elbow_fb, medial_fb = _hinge_from_lateral(shoulder[s], hle, wrist, sign, medial_hint, elbow_offset)
+            medial = _where_ok(normalize(hme - hle), medial_fb)
+            elbow = _where_ok(mid(hle, hme), elbow_fb)
             hand = L[f"{S}_HM2"]
             right_hint = medial if s == "l" else -medial
             ulnar_to_radial = rsp - usp
@@ -251,10 +264,10 @@ class Localizer:
             fle, fme, ttc = L[f"{S}_FLE"], L[f"{S}_FME"], L[f"{S}_TTC"]
             fal, tam, fcc, fm2 = L[f"{S}_FAL"], L[f"{S}_TAM"], L[f"{S}_FCC"], L[f"{S}_FM2"]
             medial_hint = -left if s == "l" else left
-            medial = _where_ok(normalize(fme - fle), _bend_axis(fle - hip, fal - fle, sign, medial_hint))
+            knee_fb, medial_fb = _hinge_from_lateral(hip, fle, fal, sign, medial_hint, knee_offset)
+            medial = _where_ok(normalize(fme - fle), medial_fb)
             # regression e2 signs: + is medial for the left knee and the right ankle (derivation in README)
-            knee = _first(mid(fle, fme), _knee_regression(fle, fal, ttc, -sign),
-                          fle + knee_offset * medial)
+            knee = _first(mid(fle, fme), _knee_regression(fle, fal, ttc, -sign), knee_fb)
             ankle_medial = _where_ok(normalize(tam - fal), normalize(reject(medial, normalize(fal - fle))))
             ankle = _first(mid(fal, tam), _ankle_regression(fle, fal, ttc, sign),
                            fal + ankle_offset * ankle_medial)

@@ -1,0 +1,77 @@
+"""Marker-set profiles and recording readers: real files, bad files, clear errors."""
+import numpy as np
+import pytest
+
+from mocap_core.profiles import LANDMARK_INDEX, ProfileError, load_profile
+from mocap_core.recordings import RecordingError, read_recording
+from tests.conftest import data_file
+
+SHIPPED = {"02_qualisys_walking_ezc3d_Qualisys.c3d": "qualisys_sports",
+           "03_sprint_start_BTK_SprintMotion.trc": "btk_sprint",
+           "08_cmu_135_02_karate_kata.c3d": "cmu41",
+           "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d": "vicon53",
+           "13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat": "dance28"}
+
+
+@pytest.mark.parametrize("file,profile", SHIPPED.items())
+def test_every_shared_recording_has_a_profile_that_resolves(file, profile):
+    rec = read_recording(data_file(file))
+    lm = load_profile(profile).resolve(rec.labels).apply(rec.positions)
+    assert lm.shape == (rec.n_frames, len(LANDMARK_INDEX), 3)
+    for name in ("SACR", "L_IAS", "R_IAS", "L_SAE", "R_HLE", "L_FLE", "R_FAL", "L_FM2"):
+        assert np.isfinite(lm[:, LANDMARK_INDEX[name]]).mean() > 0.9, name
+
+
+def test_readers_give_metres_and_nan_for_occlusions():
+    rec = read_recording(data_file("12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"))
+    assert rec.rate_hz == 120 and rec.positions.shape == (1101, 53, 3) and rec.positions.dtype == np.float32
+    clav = rec.labels.index("Nick01:CLAV")
+    assert np.isnan(rec.positions[:, clav]).all()                       # missing in every frame
+    assert 0.05 < np.isnan(rec.positions[..., 0]).mean() < 0.08         # 6.6% gaps per the MANIFEST
+    assert 0.3 < np.nanmax(np.abs(rec.positions)) < 5                   # metres, not millimetres
+    trc = read_recording(data_file("03_sprint_start_BTK_SprintMotion.trc"))
+    assert trc.rate_hz == 250 and trc.positions.shape == (788, 59, 3) and trc.labels[0] == "C7"
+    mat = read_recording(f"{data_file('13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat')}:walk1")
+    assert mat.rate_hz == 60 and mat.n_frames == 351
+
+
+def test_actor_prefixes_are_stripped():
+    rec = read_recording(data_file("08_cmu_135_02_karate_kata.c3d"))
+    assert rec.labels[0] == "male:LFHD"
+    lm = load_profile("cmu41").resolve(rec.labels).apply(rec.positions[:1])
+    lfwt = rec.labels.index("male:LFWT")
+    np.testing.assert_allclose(lm[0, LANDMARK_INDEX["L_IAS"]], rec.positions[0, lfwt], rtol=1e-6)
+
+
+def test_truncated_and_corrupt_files_give_clear_errors(tmp_path):
+    c3d = data_file("02_qualisys_walking_ezc3d_Qualisys.c3d").read_bytes()
+    (tmp_path / "cut.c3d").write_bytes(c3d[:300_000])
+    with pytest.raises(RecordingError, match="truncated"):
+        read_recording(tmp_path / "cut.c3d")
+    (tmp_path / "junk.c3d").write_bytes(b"\x00" * 100)
+    with pytest.raises(RecordingError, match="junk.c3d"):
+        read_recording(tmp_path / "junk.c3d")
+    trc = data_file("03_sprint_start_BTK_SprintMotion.trc").read_text()
+    (tmp_path / "cut.trc").write_text(trc[: len(trc) // 2])
+    with pytest.raises(RecordingError, match="truncated"):
+        read_recording(tmp_path / "cut.trc")
+    with pytest.raises(RecordingError, match="not found"):
+        read_recording(tmp_path / "none.c3d")
+    with pytest.raises(RecordingError, match="no take 'dance9'"):
+        read_recording(f"{data_file('13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat')}:dance9")
+
+
+def test_profile_errors_name_the_line(tmp_path):
+    p = tmp_path / "mine.yaml"
+    p.write_text("name: mine\nlandmarks:\n  SACR: SACR\n  L_IAS: LASI2\n  R_IAS: RASI\n")
+    prof = load_profile(p)
+    with pytest.raises(ProfileError, match=r"profile mine.yaml line 4: label LASI2 of L_IAS is not in the recording"):
+        prof.resolve(["SACR", "LASI", "RASI"])
+    p.write_text("name: mine\nlandmarks:\n  SACR: SACR\n  L_ELBOW: LELB\n")
+    with pytest.raises(ProfileError, match="line 4: unknown landmark 'L_ELBOW'"):
+        load_profile(p)
+    p.write_text("name: mine\nlandmarks:\n  SACR: mean(A,, B)\n")
+    with pytest.raises(ProfileError, match="line 3: bad expression"):
+        load_profile(p)
+    with pytest.raises(ProfileError, match="shipped profiles: .*cmu41"):
+        load_profile("no_such_profile")
