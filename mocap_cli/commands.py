@@ -1,6 +1,8 @@
-"""Offline commands (solve, eval, qtm-sim, bag, demo) register their sub-parsers here."""
+"""Offline commands register their sub-parsers here (each lives in its own module)."""
 from __future__ import annotations
 
 
 def register(sub) -> None:
-    pass
+    from mocap_cli import solve
+
+    solve.add_parser(sub)

@@ -7,6 +7,10 @@ import logging
 import sys
 from pathlib import Path
 
+from mocap_core.ik.constraints import ConstraintsError
+from mocap_core.ik.solvers import UnknownSolver
+from mocap_core.profiles import ProfileError
+from mocap_core.recordings import RecordingError
 from mocap_cli.graph_registry import NoGraph, find_graph, running_graphs
 from mocap_cli.launch_file import LaunchError, load_launch_file
 from nodes.runtime import configure_logging
@@ -112,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.log_level)
     try:
         return args.func(args) or 0
-    except (LaunchError, NoGraph) as e:
+    except (LaunchError, NoGraph, RecordingError, ProfileError, ConstraintsError, UnknownSolver) as e:
         logging.getLogger("mocap").error("%s", e)
         return 2
     except KeyboardInterrupt:

@@ -1,0 +1,1 @@
+"""Inverse kinematics: constraints (thesis 3.3), four solvers (3.5) and their chain type."""

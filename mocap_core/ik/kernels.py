@@ -1,0 +1,257 @@
+"""Numba kernels of the IK hot loops: rotations, cone and twist limits, sub-chain moves.
+
+A chain is plain arrays: joint positions ``P`` (n+1, 3) with P[0] the fixed root, bone frames
+``R`` (n, 3, 3) whose columns are the bone's x, y, z axes (y from P[i] to P[i+1]), and per bone a
+parent pointer ``pp`` (3, 3), cone angles (4,) and twist limits (2,). The reference frame of bone
+i is ``R[i-1] @ pp[i]`` (``ref0 @ pp[0]`` for the first bone), as in the thesis's code (facts 9.5).
+
+Cone limits (thesis 3.3.2): four angles from the reference y axis towards reference +x, +z, -x
+and -z. The thesis intersects the cone with the plane at its height and finds the nearest point
+on the quarter ellipse there (Eberly); at 90 degrees and beyond that plane is gone, hence its
+special cases. We pose the same 2-D problem in the azimuthal-equidistant plane around the cone
+axis (the point's distance from the centre is its angle from the axis), where a quarter ellipse
+of semi-axes equal to the angles is well defined up to 180 degrees: hinge joints, reversed cones
+and targets "behind the parent" need no special cases, and the nearest point is still Eberly's.
+
+Twist limits (thesis 3.3.1): the reference z carried onto the bone by the shortest swing, and
+the signed angle from it to the bone's z about the bone's y (right-hand rule), clamped into
+[min, max] by rotating the bone (and everything after it) about its own axis.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+EPS = 1e-12
+
+
+@njit(cache=True)
+def vnorm(v):
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+@njit(cache=True)
+def vcross(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@njit(cache=True)
+def vdot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def mv(M, v):
+    """3x3 matrix times vector, written out (small fixed sizes beat BLAS calls)."""
+    return np.array([M[0, 0] * v[0] + M[0, 1] * v[1] + M[0, 2] * v[2],
+                     M[1, 0] * v[0] + M[1, 1] * v[1] + M[1, 2] * v[2],
+                     M[2, 0] * v[0] + M[2, 1] * v[1] + M[2, 2] * v[2]])
+
+
+@njit(cache=True)
+def mtv(M, v):
+    """Transposed 3x3 matrix times vector."""
+    return np.array([M[0, 0] * v[0] + M[1, 0] * v[1] + M[2, 0] * v[2],
+                     M[0, 1] * v[0] + M[1, 1] * v[1] + M[2, 1] * v[2],
+                     M[0, 2] * v[0] + M[1, 2] * v[1] + M[2, 2] * v[2]])
+
+
+@njit(cache=True)
+def wrap(a):
+    """Angle into [-pi, pi)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+@njit(cache=True)
+def axis_angle(axis, angle):
+    """Rotation matrix about a unit axis (Rodrigues)."""
+    x, y, z = axis[0], axis[1], axis[2]
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return np.array([[t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+                     [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+                     [t * x * z - s * y, t * y * z + s * x, t * z * z + c]])
+
+
+@njit(cache=True)
+def rotation_between(a, b):
+    """Shortest-arc rotation carrying direction a onto direction b."""
+    na, nb = vnorm(a), vnorm(b)
+    if na < EPS or nb < EPS:
+        return np.eye(3)
+    a = a / na
+    b = b / nb
+    c = vdot(a, b)
+    axis = vcross(a, b)
+    s = vnorm(axis)
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        # opposite: half turn about any axis perpendicular to a
+        helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        axis = vcross(a, helper)
+        return axis_angle(axis / vnorm(axis), math.pi)
+    return axis_angle(axis / s, math.atan2(s, c))
+
+
+@njit(cache=True)
+def rotate_subchain(P, R, i, rot):
+    """Rotate joints i+1.. about P[i], and bone frames i.. (the sub-chain that bone i carries)."""
+    n = R.shape[0]
+    for k in range(i + 1, n + 1):
+        P[k] = P[i] + mv(rot, P[k] - P[i])
+    for k in range(i, n):
+        R[k] = rot @ R[k]
+
+
+@njit(cache=True)
+def ref_frame(R, ref0, pp, i):
+    if i == 0:
+        return ref0 @ pp[0]
+    return R[i - 1] @ pp[i]
+
+
+# -- cone limits -------------------------------------------------------------------------------------
+@njit(cache=True)
+def _ellipse_root(r0, z0, z1, g):
+    """Eberly's bisection for the nearest point on an ellipse (robust form, at most 149 steps)."""
+    n0 = r0 * z0
+    s0 = z1 - 1.0
+    s1 = 0.0 if g < 0 else math.sqrt(n0 * n0 + z1 * z1) - 1.0
+    s = 0.0
+    for _ in range(149):
+        s = 0.5 * (s0 + s1)
+        if s == s0 or s == s1:
+            break
+        ratio0 = n0 / (s + r0)
+        ratio1 = z1 / (s + 1.0)
+        g = ratio0 * ratio0 + ratio1 * ratio1 - 1.0
+        if g > 0:
+            s0 = s
+        elif g < 0:
+            s1 = s
+        else:
+            break
+    return s
+
+
+@njit(cache=True)
+def nearest_on_ellipse(e0, e1, y0, y1):
+    """Nearest point to (y0, y1) >= 0 on the ellipse (x0/e0)^2 + (x1/e1)^2 = 1 (Eberly 2011)."""
+    swap = e1 > e0
+    if swap:
+        e0, e1, y0, y1 = e1, e0, y1, y0
+    if y1 > 0:
+        if y0 > 0:
+            z0, z1 = y0 / e0, y1 / e1
+            g = z0 * z0 + z1 * z1 - 1.0
+            if g != 0:
+                r0 = (e0 / e1) ** 2
+                sbar = _ellipse_root(r0, z0, z1, g)
+                x0, x1 = r0 * y0 / (sbar + r0), y1 / (sbar + 1.0)
+            else:
+                x0, x1 = y0, y1
+        else:
+            x0, x1 = 0.0, e1
+    else:
+        numer0, denom0 = e0 * y0, e0 * e0 - e1 * e1
+        if numer0 < denom0:
+            xde0 = numer0 / denom0
+            x0, x1 = e0 * xde0, e1 * math.sqrt(max(0.0, 1.0 - xde0 * xde0))
+        else:
+            x0, x1 = e0, 0.0
+    if swap:
+        return x1, x0
+    return x0, x1
+
+
+@njit(cache=True)
+def cone_project(local, cone):
+    """Direction (reference coordinates) -> (inside, nearest legal direction)."""
+    x, y, z = local[0], local[1], local[2]
+    theta = math.acos(max(-1.0, min(1.0, y)))
+    h = math.sqrt(x * x + z * z)
+    if h < 1e-12:
+        if theta < 1e-9:
+            return True, local
+        x, z, h = 0.0, -1.0, 1.0  # straight behind: leave through the -z side (thesis: "behind the parent")
+    u, v = theta * x / h, theta * z / h
+    a = cone[0] if u >= 0 else cone[2]
+    b = cone[1] if v >= 0 else cone[3]
+    a, b = max(a, 1e-3), max(b, 1e-3)
+    if (u / a) ** 2 + (v / b) ** 2 <= 1.0 + 1e-9:
+        return True, local
+    pu, pv = nearest_on_ellipse(a, b, abs(u), abs(v))
+    pu = pu if u >= 0 else -pu
+    pv = pv if v >= 0 else -pv
+    t = math.sqrt(pu * pu + pv * pv)
+    if t < 1e-12:
+        return False, np.array([0.0, 1.0, 0.0])
+    st = math.sin(t)
+    return False, np.array([st * pu / t, math.cos(t), st * pv / t])
+
+
+@njit(cache=True)
+def twist_angle(Rb, ref):
+    """Signed twist (radians) of bone frame Rb about its y relative to the reference frame."""
+    swing = rotation_between(ref[:, 1], Rb[:, 1])
+    carried = mv(swing, ref[:, 2].copy())
+    bz, by = Rb[:, 2], Rb[:, 1]
+    return math.atan2(vdot(vcross(carried, bz), by), vdot(carried, bz))
+
+
+@njit(cache=True)
+def _clamp_twist(alpha, lo, hi):
+    """Nearest angle in [lo, hi] on the circle (returns alpha itself when inside)."""
+    if lo <= alpha <= hi:
+        return alpha
+    d_lo = abs(wrap(alpha - lo))
+    d_hi = abs(wrap(alpha - hi))
+    return lo if d_lo < d_hi else hi
+
+
+@njit(cache=True)
+def constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist):
+    """Bring bone i inside its cone and twist limits, moving everything it carries. True if moved."""
+    ref = ref_frame(R, ref0, pp, i)
+    moved = False
+    if has_cone[i]:
+        d = P[i + 1] - P[i]
+        nd = vnorm(d)
+        if nd > EPS:
+            local = mtv(ref, d / nd)
+            inside, legal = cone_project(local, cones[i])
+            if not inside:
+                rotate_subchain(P, R, i, rotation_between(d, mv(ref, legal)))
+                moved = True
+    if has_twist[i]:
+        alpha = twist_angle(R[i], ref)
+        target = _clamp_twist(alpha, twists[i, 0], twists[i, 1])
+        if target != alpha:
+            y = R[i][:, 1].copy()
+            rot = axis_angle(y / vnorm(y), target - alpha)
+            rotate_subchain(P, R, i, rot)
+            moved = True
+    return moved
+
+
+@njit(cache=True)
+def constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist):
+    for i in range(R.shape[0]):
+        constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist)
+
+
+@njit(cache=True)
+def escape_rotation(P, R, ref0, attempt, step_deg, max_deg):
+    """Deadlock escape (facts 9.2): rotate the whole chain about its root by +-10, +-20 ... degrees,
+    first about the reference y axis, then about its x axis. False when every angle was tried."""
+    per_axis = 2 * int(max_deg // step_deg)
+    if attempt >= 2 * per_axis:
+        return False
+    axis = ref0[:, 1].copy() if attempt < per_axis else ref0[:, 0].copy()
+    k = attempt % per_axis
+    angle = math.radians(step_deg * (k // 2 + 1) * (1 if k % 2 == 0 else -1))
+    rotate_subchain(P, R, 0, axis_angle(axis / vnorm(axis), angle))
+    return True

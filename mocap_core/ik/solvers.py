@@ -1,0 +1,79 @@
+"""One solver interface, four solvers, picked by name (STYLE: adding a solver touches one file).
+
+A solver moves a chain (positions ``P`` (n+1, 3) with a fixed root, bone frames ``R`` (n, 3, 3))
+so that its end effector reaches ``target``, honouring the chain's limits when asked.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from mocap_core.ik import solvers_kernels as k
+
+
+@dataclass(frozen=True)
+class SolverParams:
+    max_iterations: int = 140        # CCD's cap in the thesis's code (facts 9.2)
+    stop_distance_m: float = 0.01    # IK threshold of the thesis's code
+    constraints: bool = True
+    escape_step_deg: float = 10.0    # deadlock escape: rotate the chain +-10, +-20 ... degrees
+    escape_max_deg: float = 120.0
+
+
+@dataclass
+class ChainLimits:
+    ref0: np.ndarray       # (3, 3) frame of the chain root's parent
+    pp: np.ndarray         # (n, 3, 3)
+    cones: np.ndarray      # (n, 4) radians
+    has_cone: np.ndarray   # (n,)
+    twists: np.ndarray     # (n, 2) radians
+    has_twist: np.ndarray  # (n,)
+
+
+@dataclass
+class SolveResult:
+    iterations: int
+    residual_m: float
+
+
+class Solver(Protocol):
+    name: str
+
+    def solve(self, P: np.ndarray, R: np.ndarray, target: np.ndarray, limits: ChainLimits,
+              params: SolverParams) -> SolveResult: ...
+
+
+@dataclass(frozen=True)
+class KernelSolver:
+    """A solver implemented by one of the numba kernels in solvers_kernels."""
+
+    name: str
+    kernel_id: int
+
+    def solve(self, P, R, target, limits, params):
+        it, res = k.solve(self.kernel_id, P, R, np.asarray(target, np.float64), limits.ref0, limits.pp,
+                          limits.cones, limits.has_cone, limits.twists, limits.has_twist, params.constraints,
+                          params.max_iterations, params.stop_distance_m, params.escape_step_deg,
+                          params.escape_max_deg)
+        return SolveResult(int(it), float(res))
+
+
+SOLVERS: dict[str, Solver] = {
+    "ccd": KernelSolver("ccd", k.CCD),
+    "fabrik": KernelSolver("fabrik", k.FABRIK),
+    "jacobian_transpose": KernelSolver("jacobian_transpose", k.JACOBIAN_TRANSPOSE),
+    "dls": KernelSolver("dls", k.DLS),
+}
+
+
+class UnknownSolver(Exception):
+    pass
+
+
+def get_solver(name: str) -> Solver:
+    try:
+        return SOLVERS[name]
+    except KeyError:
+        raise UnknownSolver(f"unknown solver {name!r} (solvers: {', '.join(SOLVERS)})") from None

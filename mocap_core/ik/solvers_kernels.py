@@ -1,0 +1,176 @@
+"""The four IK solvers (thesis 3.5) as numba kernels sharing one driver loop.
+
+Each solver's ``*_step`` runs one iteration on a chain in place. :func:`solve` runs the loop that
+all four share: stop within ``stop_m`` of the target, the iteration cap, constraints after every
+step (when on), and the deadlock escape when the end effector stops getting closer.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from mocap_core.ik.kernels import (EPS, axis_angle, constrain_bone, constrain_chain, escape_rotation,
+                                   rotate_subchain, rotation_between, vcross, vnorm)
+
+CCD, FABRIK, JACOBIAN_TRANSPOSE, DLS = 0, 1, 2, 3
+DLS_LAMBDA = 1.1  # thesis 3.5.1
+
+
+@njit(cache=True)
+def ccd_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+    """Cyclic coordinate descent (thesis 3.5.2): from the last bone to the first, turn each bone so
+    the end effector points at the target, then enforce that bone's limits."""
+    n = R.shape[0]
+    for i in range(n - 1, -1, -1):
+        rotate_subchain(P, R, i, rotation_between(P[n] - P[i], target - P[i]))
+        if constrained:
+            constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist)
+
+
+@njit(cache=True)
+def fabrik_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+    """FABRIK (thesis 3.5.3, Aristidou and Lasenby 2011): a forward pass from the target, then a
+    backward pass from the root in which each bone is re-aimed, its frame carried by the shortest
+    arc, and its cone and twist limits enforced."""
+    n = R.shape[0]
+    lengths = np.empty(n)
+    for i in range(n):
+        lengths[i] = vnorm(P[i + 1] - P[i])
+    root = P[0].copy()
+    Q = P.copy()
+    Q[n] = target
+    for i in range(n - 1, -1, -1):
+        d = Q[i] - Q[i + 1]
+        nd = vnorm(d)
+        if nd < 1e-9:  # coincident joints: push apart along the old bone (facts: 0.001 m)
+            d = P[i] - P[i + 1]
+            nd = vnorm(d)
+        Q[i] = Q[i + 1] + d * (lengths[i] / nd)
+    Q[0] = root
+    for i in range(n):
+        d = Q[i + 1] - P[i]
+        nd = vnorm(d)
+        if nd < 1e-9:
+            continue
+        rotate_subchain(P, R, i, rotation_between(P[i + 1] - P[i], d))
+        if constrained:
+            constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist)
+
+
+@njit(cache=True)
+def jacobian(P, n):
+    """Positional Jacobian of the end effector for rotations about world x, y, z at every joint."""
+    J = np.zeros((3, 3 * n))
+    end = P[n]
+    for i in range(n):
+        r = end - P[i]
+        for a in range(3):
+            axis = np.zeros(3)
+            axis[a] = 1.0
+            J[:, 3 * i + a] = vcross(axis, r)
+    return J
+
+
+@njit(cache=True)
+def apply_angles(P, R, dtheta):
+    n = R.shape[0]
+    for i in range(n):
+        w = dtheta[3 * i: 3 * i + 3]
+        angle = vnorm(w)
+        if angle > 1e-12:
+            rotate_subchain(P, R, i, axis_angle(w / angle, angle))
+
+
+@njit(cache=True)
+def jt_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+    """Jacobian transpose (thesis 3.5.1) with the step that minimises the new error (Buss 2004):
+    alpha = <e, J J^T e> / <J J^T e, J J^T e>."""
+    n = R.shape[0]
+    J = jacobian(P, n)
+    e = target - P[n]
+    g = J.T @ e
+    jje = J @ g
+    denom = jje @ jje
+    if denom < EPS:
+        return
+    apply_angles(P, R, g * ((e @ jje) / denom))
+    if constrained:
+        constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+
+
+@njit(cache=True)
+def dls_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+    """Damped least squares (thesis 3.5.1): dtheta = J^T (J J^T + lambda^2 I)^-1 e, lambda = 1.1."""
+    n = R.shape[0]
+    J = jacobian(P, n)
+    e = target - P[n]
+    A = J @ J.T + (DLS_LAMBDA * DLS_LAMBDA) * np.eye(3)
+    apply_angles(P, R, J.T @ np.linalg.solve(A, e))
+    if constrained:
+        constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+
+
+@njit(cache=True)
+def _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+    if solver == CCD:
+        ccd_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+    elif solver == FABRIK:
+        fabrik_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+    elif solver == JACOBIAN_TRANSPOSE:
+        jt_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+    else:
+        dls_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+
+
+@njit(cache=True)
+def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained,
+          max_iter, stop_m, escape_step_deg, escape_max_deg):
+    """Run a solver on the chain in place; returns (iterations, residual distance in metres).
+
+    An unreachable target (farther than the chain is long) gets the chain stretched straight at
+    it, as in the thesis's code, then limited. When the distance stops shrinking the deadlock
+    escape turns the whole chain and the solver goes on; the best pose seen is kept."""
+    n = R.shape[0]
+    total = 0.0
+    for i in range(n):
+        total += vnorm(P[i + 1] - P[i])
+    reach = vnorm(target - P[0])
+    if reach >= total:
+        for i in range(n):
+            rotate_subchain(P, R, i, rotation_between(P[i + 1] - P[i], target - P[i]))
+        if constrained:
+            constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+        return 0, vnorm(P[n] - target)
+    best = vnorm(P[n] - target)
+    bestP, bestR = P.copy(), R.copy()
+    last = best
+    stalls = 0
+    attempt = 0
+    it = 0
+    while it < max_iter and best > stop_m:
+        _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+        it += 1
+        dist = vnorm(P[n] - target)
+        if dist < best:
+            best = dist
+            bestP[:] = P
+            bestR[:] = R
+        if dist > last - 1e-6 * max(last, 1e-3) and dist > stop_m:
+            stalls += 1
+            if stalls >= 2:
+                stalls = 0
+                P[:] = bestP
+                R[:] = bestR
+                if not escape_rotation(P, R, ref0, attempt, escape_step_deg, escape_max_deg):
+                    break
+                attempt += 1
+                if constrained:
+                    constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+        else:
+            stalls = 0
+        last = dist
+    P[:] = bestP
+    R[:] = bestR
+    return it, best

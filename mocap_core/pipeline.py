@@ -1,0 +1,59 @@
+"""The whole per-frame chain in one process, for offline commands (``mocap solve``, ``mocap eval``).
+
+The node graph runs the same stages in separate processes; both call the same mocap_core code:
+profile -> landmarks -> hip interpolation -> localization -> gap filling, with the state of each
+stage owned here (hip triangle, body estimates, previous limb chains).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+
+from mocap_core.gapfill import GapFiller
+from mocap_core.geometry import matrix_to_quat
+from mocap_core.hip_interpolation import HipInterpolator
+from mocap_core.ik.constraints import Constraints
+from mocap_core.ik.solvers import SolverParams
+from mocap_core.localization import Localizer
+from mocap_core.profiles import Profile
+
+
+@dataclass
+class SolvedChunk:
+    start: int                 # index of the first frame of the chunk
+    positions: np.ndarray      # (F, J, 3)
+    frames: np.ndarray         # (F, J, 3, 3)
+    status: np.ndarray         # (F, J)
+
+    def quaternions(self) -> np.ndarray:
+        return matrix_to_quat(self.frames)
+
+
+class SkeletonPipeline:
+    def __init__(self, profile: Profile, labels: list[str], solver: str = "ccd",
+                 params: SolverParams | None = None, constraints: Constraints | None = None,
+                 fill_gaps: bool = True):
+        self.landmark_map = profile.resolve(labels)
+        self.hips = HipInterpolator()
+        self.localizer = Localizer(profile.body)
+        self.filler = GapFiller(solver, params, constraints) if fill_gaps else None
+
+    def landmarks(self, markers: np.ndarray) -> np.ndarray:
+        """Marker frames (F, N, 3) -> landmark frames with the pelvis markers filled."""
+        lm = self.landmark_map.apply(markers)
+        lm, _ = self.hips.fill_landmarks(lm)
+        return lm
+
+    def solve_landmarks(self, landmarks: np.ndarray, start: int = 0) -> SolvedChunk:
+        loc = self.localizer.localize(landmarks)
+        pos, frames, status = loc.positions, loc.frames, loc.status
+        if self.filler is not None:
+            for f in range(len(pos)):
+                self.filler.fill(pos[f], frames[f], status[f])
+        return SolvedChunk(start, pos, frames, status)
+
+    def run(self, markers: np.ndarray, chunk: int = 250) -> Iterator[SolvedChunk]:
+        for start in range(0, len(markers), chunk):
+            yield self.solve_landmarks(self.landmarks(markers[start:start + chunk]), start)
