@@ -3,6 +3,7 @@ from __future__ import annotations
 
 
 def register(sub) -> None:
-    from mocap_cli import solve
+    from mocap_cli import demo, solve
 
     solve.add_parser(sub)
+    demo.add_parser(sub)

@@ -63,9 +63,10 @@ def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
         except UnknownKind as e:
             raise LaunchError(f"node {entry.id}: {e}") from None
         try:
-            cls.Params.model_validate(entry.params)
+            params = cls.Params.model_validate(entry.params)
         except Exception as e:
             raise LaunchError(f"node {entry.id} ({entry.kind}): bad params: {e}") from None
+        inputs, outputs = cls.inputs(params), cls.outputs(params)
         for k in range(entry.replicas):
             pid = entry.id if entry.replicas == 1 else f"{entry.id}#{k}"
             if entry.endpoint:
@@ -79,8 +80,8 @@ def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
                             namespace=lf.namespace, pub_endpoint=endpoint, control_endpoint=control_endpoint,
                             replica=k, replicas=entry.replicas)
             procs.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn,
-                              publishes=[spec.wire_topic(t) for t in cls.publishes] + [DIAGNOSTICS],
-                              subscribes=[spec.wire_topic(t) for t in cls.subscribes]))
+                              publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
+                              subscribes=[spec.wire_topic(t) for t in inputs]))
     for sub in procs:
         for topic in sub.subscribes:
             pubs = [p for p in procs if topic in p.publishes and p is not sub]

@@ -10,6 +10,11 @@ KINDS: dict[str, str] = {
     "synthetic_source": "nodes.synthetic_source:SyntheticSource",
     "relay": "nodes.relay:Relay",
     "frame_log": "nodes.frame_log:FrameLog",
+    "file_source": "nodes.file_source:FileSource",
+    "hip_interpolation": "nodes.hip_interpolation:HipInterpolation",
+    "joint_localization": "nodes.joint_localization:JointLocalization",
+    "ik_gapfill": "nodes.ik_gapfill:IkGapfill",
+    "retarget": "nodes.retarget:Retarget",
 }
 
 

@@ -46,6 +46,17 @@ class Node:
     subscribes: ClassVar[dict[str, type[Message]]] = {}   # logical topic -> message type
     publishes: ClassVar[dict[str, type[Message]]] = {}
     is_source: ClassVar[bool] = False                     # sources wait for the launcher's "start"
+    timer_period_s: ClassVar[float | None] = None         # call on_timer() this often (e.g. join timeouts)
+
+    @classmethod
+    def inputs(cls, params: BaseModel) -> dict[str, type[Message]]:
+        """Topics this node reads with these params (default: the class's ``subscribes``)."""
+        return cls.subscribes
+
+    @classmethod
+    def outputs(cls, params: BaseModel) -> dict[str, type[Message]]:
+        """Topics this node writes with these params (default: the class's ``publishes``)."""
+        return cls.publishes
 
     def __init__(self, params: BaseModel, ctx: "NodeContext"):
         self.params = params
@@ -61,6 +72,9 @@ class Node:
     def tick(self) -> float | None:
         """Sources: produce output. Return seconds until the next call, or None when finished."""
         return None
+
+    def on_timer(self) -> None:
+        """Called every ``timer_period_s`` when the class sets one."""
 
     def teardown(self) -> None:
         """Close files. Called once on shutdown, also after an error."""
@@ -84,9 +98,13 @@ class _TopicStats:
 class NodeContext:
     """What a node sees of the transport: publish, its id, its logger, the clock."""
 
-    def __init__(self, spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None):
+    def __init__(self, spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None,
+                 params: BaseModel | None = None):
         self.spec = spec
         self.node_cls = node_cls
+        params = params if params is not None else node_cls.Params.model_validate(spec.params)
+        self.subscribes = node_cls.inputs(params)
+        self.publishes = node_cls.outputs(params)
         self.log = logging.getLogger(f"mocap.{spec.id}")
         self.zctx = zctx or zmq.Context.instance()
         self.publisher_id = spec.id
@@ -96,8 +114,8 @@ class NodeContext:
         self._latency_ns: list[int] = []
         self.errors: collections.Counter[str] = collections.Counter()
         self.last_error = ""
-        self._wire = {t: spec.wire_topic(t) for t in {**node_cls.subscribes, **node_cls.publishes}}
-        self._logical = {w: t for t, w in self._wire.items() if t in node_cls.subscribes}
+        self._wire = {t: spec.wire_topic(t) for t in {**self.subscribes, **self.publishes}}
+        self._logical = {w: t for t, w in self._wire.items() if t in self.subscribes}
         self.pub: zmq.Socket | None = None
         self.sub: zmq.Socket | None = None
         self._subscriptions: collections.Counter[bytes] = collections.Counter()
@@ -115,7 +133,7 @@ class NodeContext:
         self.sub.setsockopt(zmq.RCVHWM, spec.hwm)
         self.sub.setsockopt(zmq.LINGER, 0)
         self.sub.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
-        for logical in self.node_cls.subscribes:
+        for logical in self.subscribes:
             wire = self._wire[logical]
             self.sub.setsockopt(zmq.SUBSCRIBE, wire.encode())
             for endpoint in spec.sub_endpoints.get(wire, []):
@@ -183,7 +201,7 @@ class NodeContext:
         if logical is None:
             return None  # a longer topic that shares our prefix; not ours
         try:
-            msg = decode(frames[1], wire, self.node_cls.subscribes[logical])
+            msg = decode(frames[1], wire, self.subscribes[logical])
         except DecodeError as e:
             self._error(f"decode_{e.kind}", str(e))
             return None
@@ -241,7 +259,7 @@ class _Stop(Exception):
 def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None) -> int:
     """Run one node until SIGINT/SIGTERM, or until a source finishes. Returns the exit code."""
     params = node_cls.Params.model_validate(spec.params)
-    ctx = NodeContext(spec, node_cls, zctx)
+    ctx = NodeContext(spec, node_cls, zctx, params)
     stopping = False
 
     def on_signal(signum, _frame):
@@ -271,6 +289,8 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
     started = control is None          # without a launcher, run at once
     finished = False
     next_tick = started_at
+    timer = node_cls.timer_period_s
+    next_timer = started_at + (timer or 0)
     code = 0
     try:
         node.setup()
@@ -297,7 +317,9 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
             else:
                 wait_s = 0.1
             wait_s = min(wait_s, max(0.0, next_heartbeat - now), 0.1)
-            if wait_s < 0.001 and not node_cls.subscribes and ctx.pub is not None:
+            if timer:
+                wait_s = min(wait_s, max(0.0, next_timer - now))
+            if wait_s < 0.001 and not ctx.subscribes and ctx.pub is not None:
                 time.sleep(wait_s)  # a pure source: sub-millisecond pacing without spinning a core
                 wait_s = 0.0
             # zmq polls in whole milliseconds; below one, poll without blocking.
@@ -325,6 +347,12 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
                             next_tick = time.monotonic()
                 except zmq.Again:
                     pass
+            if timer and time.monotonic() >= next_timer:
+                next_timer = time.monotonic() + timer
+                try:
+                    node.on_timer()
+                except Exception as e:
+                    ctx.handler_error("timer", e)
             if time.monotonic() >= next_heartbeat:
                 state = "running" if started else "waiting"
                 ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(state, started_at))))

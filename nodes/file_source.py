@@ -1,0 +1,72 @@
+"""Replays a C3D, TRC or MAT recording onto ``markers/raw`` at the recording's rate (or ``rate_hz``)."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet
+from mocap_core.recordings import read_recording
+from nodes.runtime import Node
+
+SET_PERIOD_S = 1.0
+REPO = Path(__file__).resolve().parents[1]
+
+
+def resolve_path(path: str) -> str:
+    """Relative paths are tried from the working directory, then from the repository root."""
+    if Path(path.split(".mat:")[0]).exists() or Path(path).is_absolute():
+        return path
+    return str(REPO / path)  # re-send the marker set so late subscribers and tools learn the labels
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    path: str = Field(description="recording: .c3d, .trc, .mat (file.mat:take picks a take)")
+    rate_hz: float = Field(0.0, ge=0, description="replay rate; 0 = the recording's own rate")
+    loop: bool = False
+    start_s: float = Field(0.0, ge=0, description="start this many seconds into the take")
+    max_frames: int = Field(0, ge=0, description="stop after this many frames; 0 = the whole take")
+
+
+class FileSource(Node):
+    kind = "file_source"
+    Params = Params
+    publishes = {"markers/raw": MarkerFrame, "markers/set": MarkerSet}
+    is_source = True
+
+    def setup(self) -> None:
+        p = self.params
+        self.rec = read_recording(resolve_path(p.path))
+        self.rate = p.rate_hz or self.rec.rate_hz
+        self.first = min(int(p.start_s * self.rec.rate_hz), self.rec.n_frames - 1)
+        self.index = self.first
+        self.sent = 0
+        self.next_set = 0.0
+        self.log.info("replaying %s: %d markers, %d frames at %.0f Hz", self.rec.source, len(self.rec.labels),
+                      self.rec.n_frames, self.rate)
+
+    def tick(self) -> float | None:
+        p, rec = self.params, self.rec
+        if self.index >= rec.n_frames:
+            if not p.loop:
+                return None
+            self.index = self.first
+        if p.max_frames and self.sent >= p.max_frames:
+            return None
+        now = time.monotonic()
+        if now >= self.next_set:
+            self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=rec.labels,
+                                                      rate_hz=self.rate, source=rec.source))
+            self.next_set = now + SET_PERIOD_S
+        pos = rec.positions[self.index]
+        flags = np.where(np.isnan(pos).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
+        frame = rec.first_frame + self.index
+        self.ctx.publish("markers/raw", MarkerFrame(
+            header=MarkerFrame.make_header(frame, self.index / rec.rate_hz, time.time_ns()),
+            labels=rec.labels, positions=pos, flags=flags))
+        self.index += 1
+        self.sent += 1
+        return 1.0 / self.rate

@@ -1,0 +1,48 @@
+"""Stage 2: apply the marker-set profile and fill missing pelvis markers (thesis 3.4.8).
+
+Reads ``markers/raw`` (the recording's own labels) and publishes ``markers/filled``: one marker per
+landmark of the profile (the PAF names, mocap_core.profiles.LANDMARKS), so every later stage is
+independent of the marker set. Flags: measured, interpolated (the pelvis markers this node
+predicted) or missing.
+"""
+from __future__ import annotations
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
+from mocap_core.hip_interpolation import HIP_INDEX, HipInterpolator
+from mocap_core.profiles import LANDMARKS, load_profile
+from nodes.runtime import Node
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    profile: str = Field(description="marker-set profile name (profiles/) or YAML path")
+    max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
+
+
+class HipInterpolation(Node):
+    kind = "hip_interpolation"
+    Params = Params
+    subscribes = {"markers/raw": MarkerFrame}
+    publishes = {"markers/filled": MarkerFrame}
+
+    def setup(self) -> None:
+        self.profile = load_profile(self.params.profile)
+        self.hips = HipInterpolator(max_step_m=self.params.max_step_m)
+        self.labels: list[str] | None = None
+        self.map = None
+
+    def on_message(self, topic, msg: MarkerFrame) -> None:
+        if msg.labels != self.labels:  # first frame, or the marker set changed: resolve again
+            self.map = self.profile.resolve(msg.labels)  # a ProfileError is counted and logged by the runtime
+            self.labels = msg.labels
+            self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
+        lm = self.map.apply(msg.positions)
+        hips, interpolated = self.hips.fill(lm[HIP_INDEX])
+        lm[HIP_INDEX] = hips
+        flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
+        flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
+        self.ctx.publish("markers/filled", MarkerFrame(header=MarkerFrame.make_header(), labels=list(LANDMARKS),
+                                                       positions=lm.astype(np.float32), flags=flags), source=msg)

@@ -1,0 +1,67 @@
+"""Stage 4: IK gap filling for one limb (thesis 3.6).
+
+``limb: torso`` reads ``skeleton/localized`` and publishes the whole skeleton with the torso filled
+on ``skeleton/torso``; the four limb nodes read ``skeleton/torso`` in parallel processes and each
+publishes its joints on ``skeleton/limb/<limb>``.
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import LimbSolution, SkeletonFrame
+from mocap_core.gapfill import LIMB_CHAINS, LimbFiller
+from mocap_core.geometry import matrix_to_quat
+from mocap_core.ik.constraints import load_constraints
+from mocap_core.ik.solvers import SOLVERS, SolverParams
+from nodes.runtime import Node
+from nodes.skeleton_codec import from_message, to_message
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    limb: Literal["torso", "left_arm", "right_arm", "left_leg", "right_leg"]
+    solver: str = Field("ccd", description=f"one of {', '.join(SOLVERS)}")
+    constraints: bool = True
+    constraints_file: str | None = None
+    max_iterations: int = Field(140, ge=1)
+    stop_distance_m: float = Field(0.01, gt=0)
+
+
+class IkGapfill(Node):
+    kind = "ik_gapfill"
+    Params = Params
+    subscribes = {"in": SkeletonFrame}
+    publishes = {"skeleton/torso": SkeletonFrame, "out": LimbSolution}
+
+    @classmethod
+    def inputs(cls, params):
+        # the torso reads the localized skeleton; the limbs read the torso's output
+        return {"skeleton/localized" if params.limb == "torso" else "skeleton/torso": SkeletonFrame}
+
+    @classmethod
+    def outputs(cls, params):
+        if params.limb == "torso":
+            return {"skeleton/torso": SkeletonFrame}
+        return {f"skeleton/limb/{params.limb}": LimbSolution}
+
+    def setup(self) -> None:
+        p = self.params
+        self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
+                                 load_constraints(p.constraints_file))
+        self.names = list(LIMB_CHAINS[p.limb])
+
+    def on_message(self, topic, msg: SkeletonFrame) -> None:
+        pos, frames, status = from_message(msg)
+        stats = self.filler.fill(pos, frames, status)
+        if self.params.limb == "torso":
+            self.ctx.publish("skeleton/torso", to_message(pos, frames, status), source=msg)
+            return
+        idx = self.filler.joints
+        self.ctx.publish(f"skeleton/limb/{self.params.limb}", LimbSolution(
+            header=LimbSolution.make_header(), limb=self.params.limb, joints=self.names,
+            positions=pos[idx].astype(np.float32), orientations=matrix_to_quat(frames[idx]).astype(np.float32),
+            status=status[idx], solver=self.params.solver, iterations=stats.iterations,
+            residual_m=stats.residual_m, solve_time_us=stats.solve_time_us), source=msg)

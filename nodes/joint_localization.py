@@ -1,0 +1,31 @@
+"""Stage 3: joint centres and bone frames from the landmarks (thesis 3.4) -> ``skeleton/localized``."""
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import MarkerFrame, SkeletonFrame
+from mocap_core.localization import Localizer
+from mocap_core.profiles import LANDMARKS, load_profile
+from nodes.runtime import Node
+from nodes.skeleton_codec import to_message
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    profile: str = Field(description="marker-set profile (its body measurements feed the fallbacks)")
+
+
+class JointLocalization(Node):
+    kind = "joint_localization"
+    Params = Params
+    subscribes = {"markers/filled": MarkerFrame}
+    publishes = {"skeleton/localized": SkeletonFrame}
+
+    def setup(self) -> None:
+        self.localizer = Localizer(load_profile(self.params.profile).body)
+
+    def on_message(self, topic, msg: MarkerFrame) -> None:
+        if msg.labels != list(LANDMARKS):
+            raise ValueError("expected landmark frames from hip_interpolation (labels are the PAF landmarks)")
+        loc = self.localizer.localize(msg.positions[None])
+        self.ctx.publish("skeleton/localized", to_message(loc.positions[0], loc.frames[0], loc.status[0]), source=msg)
