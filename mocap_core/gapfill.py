@@ -63,12 +63,13 @@ class LimbFiller:
         self.prev_pos: np.ndarray | None = None     # (n, 3) last output of the limb's joints
         self.prev_frames: np.ndarray | None = None  # (n, 3, 3)
         self.prev_parent_frame: np.ndarray | None = None
+        c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
+        self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
+                           c.twists[self.joints], c.has_twist[self.joints])
 
-    def _limits(self, chain: np.ndarray, ref0: np.ndarray) -> ChainLimits:
-        c = self.constraints
-        bones = self.joints[chain[:-1]]
-        return ChainLimits(np.ascontiguousarray(ref0), c.pp[bones], c.cones[bones], c.has_cone[bones],
-                           c.twists[bones], c.has_twist[bones])
+    def _limits(self, root: int, last: int, ref0: np.ndarray) -> ChainLimits:
+        pp, cones, has_cone, twists, has_twist = (a[root:last] for a in self._limits_of)
+        return ChainLimits(np.ascontiguousarray(ref0), pp, cones, has_cone, twists, has_twist)
 
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> FillStats:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton)."""
@@ -113,8 +114,8 @@ class LimbFiller:
             if not np.isfinite(ref0).all():
                 ref0 = parent_frame
             if t < n:
-                result = self.solver.solve(P, R, positions[idx[t]].astype(np.float64), self._limits(chain, ref0),
-                                           self.params)
+                result = self.solver.solve(P, R, positions[idx[t]].astype(np.float64),
+                                           self._limits(root, last, ref0), self.params)
                 stats.iterations += result.iterations
                 stats.residual_m = max(stats.residual_m, result.residual_m)
                 filled = chain[1:-1]

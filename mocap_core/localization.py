@@ -13,16 +13,22 @@ Per-subject estimates (chest depth, shoulder width, height, mass) are running me
 frames seen so far (facts 7.3). They live in :class:`BodyEstimate`, owned by the caller, so the
 live node and the offline batch give the same numbers. Unlike the 2018 code, the height is a true
 running mean of the samples (the original's estimate drifted towards 175 cm).
+
+The per-frame work is one numba kernel (``_localize_frame``): the live node localizes one frame
+at a time and numpy's per-call overhead made that 100x slower than the 50 us budget.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
-from mocap_core.geometry import cross, frame_yx, frame_yz, frame_zx, mid, norm, normalize, reject
-from mocap_core.profiles import LANDMARK_INDEX, BodyMeasurements
-from mocap_core.skeleton import INDEX, N_JOINTS, Status
+from mocap_core.ik.kernels import mtv, mv, vcross, vdot, vnorm
+from mocap_core.profiles import LANDMARK_INDEX as _L
+from mocap_core.profiles import BodyMeasurements
+from mocap_core.skeleton import INDEX as _J
+from mocap_core.skeleton import N_JOINTS, Status
 
 # Constants of the original code (facts 7.2), metres.
 MARKER_TO_SPINE_M = 0.08
@@ -36,42 +42,28 @@ DEFAULT_HALF_SHOULDER_WIDTH_MM = 200.0
 # and the width fallbacks lean on the pelvis/chest lateral axis instead (blend up to +0.25).
 STRAIGHT_SIN = 0.17
 
+# Landmark and joint indices as plain ints, frozen into the compiled kernel.
+SACR, L_IAS, R_IAS, TV12, TV2, SME, SGL = (_L[n] for n in ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "SGL"))
+HEAD_MARK = np.array([_L["L_HEAD"], _L["R_HEAD"]])
+SIDE_MARKS = np.array([[_L[f"{s}_{n}"] for n in ("SAE", "HLE", "HME", "RSP", "USP", "HM2", "FLE", "FME", "TTC",
+                                                  "FAL", "TAM", "FCC", "FM2")] for s in "LR"])
+M_SAE, M_HLE, M_HME, M_RSP, M_USP, M_HM2, M_FLE, M_FME, M_TTC, M_FAL, M_TAM, M_FCC, M_FM2 = range(13)
+J_PELVIS, J_SPINE0, J_SPINE1, J_SPINE3, J_NECK, J_HEAD, J_HEAD_TOP = (
+    _J[n] for n in ("pelvis", "spine0", "spine1", "spine3", "neck", "head", "head_top"))
+SIDE_JOINTS = np.array([[_J[f"{n}_{s}"] for n in ("clavicle", "shoulder", "elbow", "wrist", "hand", "hip", "knee",
+                                                   "ankle", "foot", "toe")] for s in "lr"])
+S_CLAV, S_SHOULDER, S_ELBOW, S_WRIST, S_HAND, S_HIP, S_KNEE, S_ANKLE, S_FOOT, S_TOE = range(10)
+
 
 @dataclass
 class BodyEstimate:
-    """Running sums for the subject's measurements (facts 7.3). One per actor, kept across frames."""
+    """Running sums for the subject's measurements (facts 7.3). One per actor, kept across frames.
 
-    chest_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))  # TV2->SME in the chest frame, m
-    chest_n: int = 0
-    half_width_sum_mm: float = 0.0
-    half_width_n: int = 0
-    height_sum_cm: float = 0.0
-    height_n: int = 0
+    ``sums``: TV2->SME in the chest frame (3, metres), half shoulder width (mm), height (cm);
+    ``counts``: how many valid samples each sum holds."""
 
-    @staticmethod
-    def _running(samples: np.ndarray, prev_sum, prev_n: int):
-        """Per-frame running means of samples (F, ...) that may be NaN; also the new sum and count."""
-        ok = ~np.isnan(samples).reshape(len(samples), -1).any(axis=1)
-        vals = np.where(ok.reshape((-1,) + (1,) * (samples.ndim - 1)), samples, 0.0)
-        sums = np.cumsum(vals, axis=0) + prev_sum
-        counts = np.cumsum(ok) + prev_n
-        with np.errstate(invalid="ignore", divide="ignore"):
-            means = sums / counts.reshape((-1,) + (1,) * (samples.ndim - 1))
-        means[counts == 0] = np.nan
-        return means, (sums[-1] if len(sums) else prev_sum), int(counts[-1]) if len(counts) else prev_n
-
-    def update_chest(self, samples):
-        means, self.chest_sum, self.chest_n = self._running(samples, self.chest_sum, self.chest_n)
-        return means
-
-    def update_half_width(self, samples):
-        means, self.half_width_sum_mm, self.half_width_n = self._running(samples, self.half_width_sum_mm,
-                                                                         self.half_width_n)
-        return means
-
-    def update_height(self, samples):
-        means, self.height_sum_cm, self.height_n = self._running(samples, self.height_sum_cm, self.height_n)
-        return means
+    sums: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    counts: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass
@@ -85,201 +77,276 @@ class Localized:
     half_shoulder_width_mm: np.ndarray
 
 
-def _first(*candidates: np.ndarray) -> np.ndarray:
-    """Per frame, the first candidate (F, 3) without NaN."""
-    out = candidates[0].copy()
-    for c in candidates[1:]:
-        bad = np.isnan(out).any(axis=-1)
-        out[bad] = c[bad]
-    return out
-
-
-def _where_ok(value: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    return _first(value, fallback)
-
-
-def _bend_axis(proximal: np.ndarray, distal: np.ndarray, sign: float, medial_hint: np.ndarray) -> np.ndarray:
-    """Unit medial direction of a hinge joint (elbow, knee), perpendicular to the proximal segment.
-
-    Bent: the flexion axis (proximal x distal), signed so it points medially. Nearly straight: the
-    trunk's lateral axis (``medial_hint``, already pointing medially) projected off the segment."""
-    flex = cross(proximal, distal)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sin = norm(flex) / (norm(proximal) * norm(distal))
-    w = np.clip((sin - STRAIGHT_SIN) / 0.25, 0.0, 1.0)[..., None]
-    flex_dir = normalize(flex) * sign
-    hint = normalize(reject(medial_hint, normalize(proximal)))
-    flex_dir = np.where(np.isnan(flex_dir), 0.0, flex_dir)
-    return normalize(w * flex_dir + (1 - w) * hint)
-
-
-def _hinge_from_lateral(parent: np.ndarray, lateral: np.ndarray, distal: np.ndarray, sign: float,
-                        medial_hint: np.ndarray, offset_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Joint centre = lateral marker + offset along the medial axis (Plug-in Gait's idea).
-
-    The axis must be perpendicular to the parent->joint line, which passes through the unknown
-    centre, not through the marker: two fixed-point steps settle it (like PiG's chord function)."""
-    centre = lateral
-    for _ in range(3):
-        medial = _bend_axis(centre - parent, distal - centre, sign, medial_hint)
-        centre = lateral + offset_m * medial
-    return centre, medial
-
-
-def _knee_regression(fle, fal, ttc, sign_e2):
-    """Thesis knee regression (facts 7.4), e2 signed so the offset points medially."""
-    x = normalize(mid(fle, fal) - ttc)
-    z = normalize(fle - fal)
-    s = norm(fle - fal)[..., None]
-    e2 = cross(z, x)
-    e1 = cross(e2, z)
-    return fle + (-0.1033 * s) * e1 + (sign_e2 * 0.09814 * s) * e2 + (0.0597 * s) * z
-
-
-def _ankle_regression(fle, fal, ttc, sign_e2):
-    """Thesis ankle regression (facts 7.4, "from Visual3D"), e2 signed so the offset points medially."""
-    x = normalize(mid(fle, fal) - ttc)
-    z = normalize(fal - fle)
-    s = norm(fal - fle)[..., None]
-    e2 = cross(z, x)
-    e1 = cross(e2, z)
-    return fal + (-0.07675 * s) * e1 + (sign_e2 * 0.05482 * s) * e2 + (-0.02741 * s) * z
-
-
 class Localizer:
     """Turns landmark frames into located joints. Keep one per actor: it owns the body estimates."""
 
     def __init__(self, body: BodyMeasurements | None = None):
         self.body = body or BodyMeasurements()
         self.estimate = BodyEstimate()
+        b = self.body
+        self._body = np.array([np.nan if b.height_cm is None else b.height_cm,
+                               np.nan if b.mass_kg is None else b.mass_kg,
+                               b.marker_diameter_mm / 2000, b.elbow_width_mm / 2000,
+                               b.knee_width_mm / 2000, b.ankle_width_mm / 2000])
 
     def localize(self, landmarks: np.ndarray) -> Localized:
-        lm = np.asarray(landmarks, dtype=np.float64)
+        lm = np.ascontiguousarray(landmarks, dtype=np.float64)
         if lm.ndim == 2:
             lm = lm[None]
         n = lm.shape[0]
-        L = {name: lm[:, i] for name, i in LANDMARK_INDEX.items()}
         pos = np.full((n, N_JOINTS, 3), np.nan)
         frames = np.full((n, N_JOINTS, 3, 3), np.nan)
-        body = self.body
-        marker_r_m = body.marker_diameter_mm / 2000
-
-        def put(joint, p=None, r=None):
-            if p is not None:
-                pos[:, INDEX[joint]] = p
-            if r is not None:
-                frames[:, INDEX[joint]] = r
-
-        # -- pelvis and hips (thesis 3.4.1; Harrington et al. 2006 with the published +7.3 mm) --------
-        sacr, lias, rias = L["SACR"], L["L_IAS"], L["R_IAS"]
-        mid_asis = mid(lias, rias)
-        r_hip = frame_yx(cross(mid_asis - sacr, lias - rias), lias - rias)  # x left, y up, z forward
-        left, up, fwd = r_hip[..., 0], r_hip[..., 1], r_hip[..., 2]
-        pw = norm(lias - rias)[..., None] * 1000
-        pd = norm(mid_asis - sacr)[..., None] * 1000
-        lateral = (0.33 * pw + 7.3) / 1000
-        down_back = (up * (-0.30 * pw - 10.9) + fwd * (-0.24 * pd - 9.9)) / 1000
-        hip_l = mid_asis + left * lateral + down_back
-        hip_r = mid_asis - left * lateral + down_back
-        pelvis = mid(hip_l, hip_r)
-        put("pelvis", pelvis, r_hip)
-        put("hip_l", hip_l)
-        put("hip_r", hip_r)
-
-        # -- chest frame (facts 7.4 ChestOrientation), sternum-clavicle point, spine (3.4.3) --------
-        tv2, tv12, sme = L["TV2"], L["TV12"], L["SME"]
-        lsae, rsae = L["L_SAE"], L["R_SAE"]
-        chest_y = _first(mid(lsae, rsae) - sacr, mid(tv2, tv12) - sacr, tv2 - sacr, tv12 - sacr, up)
-        chest_x = _first(lsae - rsae, mid(sme, tv2) - rsae, lsae - mid(sme, tv2), left)
-        r_chest = frame_yx(chest_y, chest_x)
-        c_left, c_up, c_fwd = r_chest[..., 0], r_chest[..., 1], r_chest[..., 2]
-        neck_to_chest = np.einsum("fji,fj->fi", r_chest, sme - tv2)  # in the chest frame
-        n_vec = self.estimate.update_chest(neck_to_chest)
-        n_world = np.einsum("fij,fj->fi", r_chest, n_vec)
-        sternum_clavicle = _first(sme - 0.5 * n_world, tv2 + 0.5 * n_world, tv2 + MARKER_TO_SPINE_M * c_fwd,
-                                  mid(lsae, rsae))
-        spine0 = sacr + MARKER_TO_SPINE_M * fwd
-        spine1 = tv12 + MARKER_TO_SPINE_M * fwd
-        neck = sternum_clavicle + NECK_ABOVE_STERNUM_M * c_up
-        put("spine0", spine0, frame_yz(_first(spine1, sternum_clavicle) - spine0, fwd))
-        put("spine1", spine1, frame_yx(sternum_clavicle - spine1, hip_l - hip_r))
-        put("spine3", sternum_clavicle, r_chest)
-
-        # -- head (3.4.4) ----------------------------------------------------------------------------
-        lhead, rhead, sgl = L["L_HEAD"], L["R_HEAD"], L["SGL"]
-        head = mid(lhead, rhead)
-        r_head = frame_zx(sgl - head, lhead - rhead)
-        r_head = np.where(np.isnan(r_head), frame_yx(head - neck, lhead - rhead), r_head)  # no forehead marker
-        put("neck", neck, frame_yz(head - neck, c_fwd))
-        put("head", head, r_head)
-        put("head_top", head + HEAD_TOP_ABOVE_HEAD_M * r_head[..., 1], r_head)
-
-        # -- body estimates (facts 7.3): chest depth, half shoulder width, height, mass ----------------
-        cd_mm = norm(n_vec) * 1000
-        cd_mm = np.where(np.isnan(cd_mm), DEFAULT_CHEST_DEPTH_MM, cd_mm)
-        sw_mm = self.estimate.update_half_width(norm(lsae - rsae) * 500)
-        sw_mm = np.where(np.isnan(sw_mm), DEFAULT_HALF_SHOULDER_WIDTH_MM, sw_mm)
-        if body.height_cm is not None:
-            height = np.full(n, body.height_cm)
-        else:
-            leg = _first((norm(L["R_FAL"] - L["R_FLE"]) + norm(L["R_FLE"] - rias))[:, None],
-                         (norm(L["L_FAL"] - L["L_FLE"]) + norm(L["L_FLE"] - lias))[:, None])[:, 0]
-            trunk = _first((norm(sacr - tv2) + norm(tv2 - sgl))[:, None], norm(sacr - _first(sgl, head))[:, None])[:, 0]
-            sample = (leg + trunk) * 100
-            sample = np.where(sample < 250, sample, np.nan)
-            height = self.estimate.update_height(sample[:, None])[:, 0]
-            height = np.where(np.isnan(height), DEFAULT_HEIGHT_CM, height)
-        mass = np.full(n, body.mass_kg) if body.mass_kg is not None else (height / 100) ** 2 * BMI
-
-        # -- shoulders (3.4.2; Campbell et al. 2009), clavicles ------------------------------------------
-        gx = (96.2 - 0.302 * cd_mm - 0.364 * height + 0.385 * mass)[:, None] / 1000   # medial
-        gy = (-66.32 + 0.30 * cd_mm - 0.432 * mass)[:, None] / 1000                   # up
-        gz = (66.468 - 0.531 * sw_mm + 0.571 * mass)[:, None] / 1000                  # forward
-        shoulder = {"l": lsae + gx * -c_left + gy * c_up + gz * c_fwd,
-                    "r": rsae + gx * c_left + gy * c_up + gz * c_fwd}
-
-        # -- arms (3.4.6, 3.4.7) ------------------------------------------------------------------------
-        elbow_offset = body.elbow_width_mm / 2000 + marker_r_m
-        for s, S, sign in (("l", "L", 1.0), ("r", "R", -1.0)):
-            hle, hme, rsp, usp = L[f"{S}_HLE"], L[f"{S}_HME"], L[f"{S}_RSP"], L[f"{S}_USP"]
-            wrist = mid(rsp, usp)
-            medial_hint = -c_left if s == "l" else c_left
-            elbow_fb, medial_fb = _hinge_from_lateral(shoulder[s], hle, wrist, sign, medial_hint, elbow_offset)
-            medial = _where_ok(normalize(hme - hle), medial_fb)
-            elbow = _where_ok(mid(hle, hme), elbow_fb)
-            hand = L[f"{S}_HM2"]
-            right_hint = medial if s == "l" else -medial
-            ulnar_to_radial = rsp - usp
-            r_wrist = frame_yz(hand - wrist, ulnar_to_radial)
-            put(f"clavicle_{s}", sternum_clavicle, frame_yz(shoulder[s] - sternum_clavicle, c_fwd))
-            put(f"shoulder_{s}", shoulder[s], frame_yx(elbow - shoulder[s], right_hint))
-            put(f"elbow_{s}", elbow, frame_yz(wrist - elbow, ulnar_to_radial))
-            put(f"wrist_{s}", wrist, r_wrist)
-            put(f"hand_{s}", hand, r_wrist)
-
-        # -- legs (3.4.5, 3.4.7) -------------------------------------------------------------------------
-        knee_offset = body.knee_width_mm / 2000 + marker_r_m
-        ankle_offset = body.ankle_width_mm / 2000 + marker_r_m
-        for s, S, sign, hip in (("l", "L", -1.0, hip_l), ("r", "R", 1.0, hip_r)):
-            fle, fme, ttc = L[f"{S}_FLE"], L[f"{S}_FME"], L[f"{S}_TTC"]
-            fal, tam, fcc, fm2 = L[f"{S}_FAL"], L[f"{S}_TAM"], L[f"{S}_FCC"], L[f"{S}_FM2"]
-            medial_hint = -left if s == "l" else left
-            knee_fb, medial_fb = _hinge_from_lateral(hip, fle, fal, sign, medial_hint, knee_offset)
-            medial = _where_ok(normalize(fme - fle), medial_fb)
-            # regression e2 signs: + is medial for the left knee and the right ankle (derivation in README)
-            knee = _first(mid(fle, fme), _knee_regression(fle, fal, ttc, -sign), knee_fb)
-            ankle_medial = _where_ok(normalize(tam - fal), normalize(reject(medial, normalize(fal - fle))))
-            ankle = _first(mid(fal, tam), _ankle_regression(fle, fal, ttc, sign),
-                           fal + ankle_offset * ankle_medial)
-            foot = _first(0.4 * fcc + 0.6 * fm2, 0.4 * ankle + 0.6 * fm2)
-            right_knee = medial if s == "l" else -medial
-            right_ankle = ankle_medial if s == "l" else -ankle_medial
-            r_foot = frame_yz(fm2 - foot, knee - ankle)
-            put(f"hip_{s}", None, frame_yx(knee - hip, hip_r - hip_l))
-            put(f"knee_{s}", knee, frame_yx(ankle - knee, right_knee))
-            put(f"ankle_{s}", ankle, frame_yx(foot - ankle, right_ankle))
-            put(f"foot_{s}", foot, r_foot)
-            put(f"toe_{s}", fm2, r_foot)
-
+        body_used = np.empty((n, 4))
+        _localize_batch(lm, pos, frames, body_used, self._body, self.estimate.sums, self.estimate.counts)
         status = np.where(np.isnan(pos).any(axis=-1), Status.MISSING, Status.LOCATED).astype(np.uint8)
-        return Localized(pos, frames, status, height, mass, cd_mm, sw_mm)
+        return Localized(pos, frames, status, *body_used.T)
+
+
+# -- kernel helpers ---------------------------------------------------------------------------------------
+@njit(cache=True)
+def _ok(v):
+    return np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])
+
+
+@njit(cache=True)
+def _unit(v):
+    n = vnorm(v)
+    if not n > 1e-9:
+        return np.full(3, np.nan)
+    return v / n
+
+
+@njit(cache=True)
+def _reject(v, unit_axis):
+    return v - vdot(v, unit_axis) * unit_axis
+
+
+@njit(cache=True)
+def _frame(x, y, z):
+    f = np.empty((3, 3))
+    f[:, 0], f[:, 1], f[:, 2] = x, y, z
+    return f
+
+
+@njit(cache=True)
+def _frame_yz(y, z_hint):
+    """y exactly along y, z as close to z_hint as possible, x = y cross z (LookAtUp)."""
+    yy = _unit(y)
+    zz = _unit(_reject(z_hint, yy))
+    return _frame(vcross(yy, zz), yy, zz)
+
+
+@njit(cache=True)
+def _frame_yx(y, x_hint):
+    """y exactly along y, x as close to x_hint as possible, z = x cross y (LookAtRight)."""
+    yy = _unit(y)
+    xx = _unit(_reject(x_hint, yy))
+    return _frame(xx, yy, vcross(xx, yy))
+
+
+@njit(cache=True)
+def _frame_zx(z, x_hint):
+    zz = _unit(z)
+    xx = _unit(_reject(x_hint, zz))
+    return _frame(xx, vcross(zz, xx), zz)
+
+
+@njit(cache=True)
+def _first2(a, b):
+    return a if _ok(a) else b
+
+
+@njit(cache=True)
+def _frame_ok(f):
+    return np.isfinite(f).all()
+
+
+@njit(cache=True)
+def _bend_axis(proximal, distal, sign, medial_hint):
+    """Unit medial direction of a hinge (elbow, knee), perpendicular to the proximal segment: the
+    flexion axis (proximal x distal, signed medially) when bent, the trunk's lateral axis projected
+    off the segment when nearly straight, blended in between."""
+    flex = vcross(proximal, distal)
+    denom = vnorm(proximal) * vnorm(distal)
+    s = vnorm(flex) / denom if denom > 1e-12 else 0.0
+    w = min(1.0, max(0.0, (s - STRAIGHT_SIN) / 0.25))
+    flex_dir = _unit(flex) * sign
+    if not _ok(flex_dir):
+        flex_dir = np.zeros(3)
+    hint = _unit(_reject(medial_hint, _unit(proximal)))
+    return _unit(w * flex_dir + (1 - w) * hint)
+
+
+@njit(cache=True)
+def _hinge_from_lateral(parent, lateral, distal, sign, medial_hint, offset):
+    """Joint centre = lateral marker + offset along the medial axis (Plug-in Gait's idea). The axis
+    must be perpendicular to the parent->centre line, which passes through the unknown centre: three
+    fixed-point steps settle it (like PiG's chord function)."""
+    centre = lateral.copy()
+    medial = np.full(3, np.nan)
+    for _ in range(3):
+        medial = _bend_axis(centre - parent, distal - centre, sign, medial_hint)
+        centre = lateral + offset * medial
+    return centre, medial
+
+
+@njit(cache=True)
+def _regression(fle, fal, ttc, up_shank, c1, c2, c3):
+    """The thesis's knee/ankle regressions (facts 7.4): origin FLE (knee) or FAL (ankle)."""
+    x = _unit(0.5 * (fle + fal) - ttc)
+    if up_shank:
+        z, s, origin = _unit(fle - fal), vnorm(fle - fal), fle
+    else:
+        z, s, origin = _unit(fal - fle), vnorm(fal - fle), fal
+    e2 = vcross(z, x)
+    e1 = vcross(e2, z)
+    return origin + (c1 * s) * e1 + (c2 * s) * e2 + (c3 * s) * z
+
+
+@njit(cache=True)
+def _running(sums, counts, k0, k1, ci, sample):
+    """Add a sample (NaN = none) to a running mean; return the mean (NaN before any sample)."""
+    if np.isfinite(sample).all():
+        sums[k0:k1] += sample
+        counts[ci] += 1
+    if counts[ci] == 0:
+        return np.full(k1 - k0, np.nan)
+    return sums[k0:k1] / counts[ci]
+
+
+# -- the kernel -----------------------------------------------------------------------------------------
+@njit(cache=True)
+def _localize_batch(lms, pos, frames, body_used, body, sums, counts):
+    for f in range(lms.shape[0]):
+        _localize_frame(lms[f], pos[f], frames[f], body_used[f], body, sums, counts)
+
+
+@njit(cache=True)
+def _localize_frame(lm, pos, frames, used, body, sums, counts):
+    height_given, mass_given, marker_r = body[0], body[1], body[2]
+    elbow_off, knee_off, ankle_off = body[3] + marker_r, body[4] + marker_r, body[5] + marker_r
+
+    # pelvis and hips (thesis 3.4.1; Harrington et al. 2006 with the published +7.3 mm)
+    sacr, lias, rias = lm[SACR], lm[L_IAS], lm[R_IAS]
+    mid_asis = 0.5 * (lias + rias)
+    r_hip = _frame_yx(vcross(mid_asis - sacr, lias - rias), lias - rias)  # x left, y up, z forward
+    left, up, fwd = r_hip[:, 0].copy(), r_hip[:, 1].copy(), r_hip[:, 2].copy()
+    pw = vnorm(lias - rias) * 1000
+    pd = vnorm(mid_asis - sacr) * 1000
+    lateral = (0.33 * pw + 7.3) / 1000
+    down_back = (up * (-0.30 * pw - 10.9) + fwd * (-0.24 * pd - 9.9)) / 1000
+    hips = (mid_asis + left * lateral + down_back, mid_asis - left * lateral + down_back)
+    pos[J_PELVIS] = 0.5 * (hips[0] + hips[1])
+    frames[J_PELVIS] = r_hip
+
+    # chest frame (facts 7.4 ChestOrientation), sternum-clavicle point, spine (3.4.3)
+    tv2, tv12, sme, lsae, rsae = lm[TV2], lm[TV12], lm[SME], lm[SIDE_MARKS[0, M_SAE]], lm[SIDE_MARKS[1, M_SAE]]
+    chest_y = 0.5 * (lsae + rsae) - sacr
+    for cand in (0.5 * (tv2 + tv12) - sacr, tv2 - sacr, tv12 - sacr, up):
+        chest_y = _first2(chest_y, cand)
+    chest_x = lsae - rsae
+    for cand in (0.5 * (sme + tv2) - rsae, lsae - 0.5 * (sme + tv2), left):
+        chest_x = _first2(chest_x, cand)
+    r_chest = _frame_yx(chest_y, chest_x)
+    c_left, c_up, c_fwd = r_chest[:, 0].copy(), r_chest[:, 1].copy(), r_chest[:, 2].copy()
+    neck_to_chest = mtv(r_chest, sme - tv2)
+    n_vec = _running(sums, counts, 0, 3, 0, neck_to_chest)
+    n_world = mv(r_chest, n_vec)
+    sc = sme - 0.5 * n_world
+    for cand in (tv2 + 0.5 * n_world, tv2 + MARKER_TO_SPINE_M * c_fwd, 0.5 * (lsae + rsae)):
+        sc = _first2(sc, cand)
+    spine0 = sacr + MARKER_TO_SPINE_M * fwd
+    spine1 = tv12 + MARKER_TO_SPINE_M * fwd
+    neck = sc + NECK_ABOVE_STERNUM_M * c_up
+    pos[J_SPINE0], frames[J_SPINE0] = spine0, _frame_yz(_first2(spine1, sc) - spine0, fwd)
+    pos[J_SPINE1], frames[J_SPINE1] = spine1, _frame_yx(sc - spine1, hips[0] - hips[1])
+    pos[J_SPINE3], frames[J_SPINE3] = sc, r_chest
+
+    # head (3.4.4); without a forehead marker the head's up axis is neck->head
+    lhead, rhead, sgl = lm[HEAD_MARK[0]], lm[HEAD_MARK[1]], lm[SGL]
+    head = 0.5 * (lhead + rhead)
+    r_head = _frame_zx(sgl - head, lhead - rhead)
+    if not _frame_ok(r_head):
+        r_head = _frame_yx(head - neck, lhead - rhead)
+    pos[J_NECK], frames[J_NECK] = neck, _frame_yz(head - neck, c_fwd)
+    pos[J_HEAD], frames[J_HEAD] = head, r_head
+    pos[J_HEAD_TOP], frames[J_HEAD_TOP] = head + HEAD_TOP_ABOVE_HEAD_M * r_head[:, 1], r_head
+
+    # body estimates (facts 7.3): chest depth, half shoulder width, height, mass
+    cd = vnorm(n_vec) * 1000 if _ok(n_vec) else DEFAULT_CHEST_DEPTH_MM
+    sw = _running(sums, counts, 3, 4, 1, np.array([vnorm(lsae - rsae) * 500]))[0]
+    if not np.isfinite(sw):
+        sw = DEFAULT_HALF_SHOULDER_WIDTH_MM
+    if np.isfinite(height_given):
+        height = height_given
+    else:
+        R, Lt = SIDE_MARKS[1], SIDE_MARKS[0]
+        leg = vnorm(lm[R[M_FAL]] - lm[R[M_FLE]]) + vnorm(lm[R[M_FLE]] - rias)
+        if not np.isfinite(leg):
+            leg = vnorm(lm[Lt[M_FAL]] - lm[Lt[M_FLE]]) + vnorm(lm[Lt[M_FLE]] - lias)
+        trunk = vnorm(sacr - tv2) + vnorm(tv2 - sgl)
+        if not np.isfinite(trunk):
+            trunk = vnorm(sacr - _first2(sgl, head))
+        sample = (leg + trunk) * 100
+        if not sample < 250:
+            sample = np.nan
+        height = _running(sums, counts, 4, 5, 2, np.array([sample]))[0]
+        if not np.isfinite(height):
+            height = DEFAULT_HEIGHT_CM
+    mass = mass_given if np.isfinite(mass_given) else (height / 100) ** 2 * BMI
+    used[0], used[1], used[2], used[3] = height, mass, cd, sw
+
+    # shoulders (3.4.2; Campbell et al. 2009) from the acromion, in the chest frame
+    gx = (96.2 - 0.302 * cd - 0.364 * height + 0.385 * mass) / 1000   # medial
+    gy = (-66.32 + 0.30 * cd - 0.432 * mass) / 1000                   # up
+    gz = (66.468 - 0.531 * sw + 0.571 * mass) / 1000                  # forward
+
+    for side in range(2):
+        M, J = SIDE_MARKS[side], SIDE_JOINTS[side]
+        arm_sign = 1.0 if side == 0 else -1.0          # flexion-axis sign that points medially
+        medial_trunk = -c_left if side == 0 else c_left
+        medial_pelvis = -left if side == 0 else left
+
+        # arms (3.4.6, 3.4.7)
+        shoulder = lm[M[M_SAE]] + gx * medial_trunk + gy * c_up + gz * c_fwd
+        hle, hme, rsp, usp, hand = lm[M[M_HLE]], lm[M[M_HME]], lm[M[M_RSP]], lm[M[M_USP]], lm[M[M_HM2]]
+        wrist = 0.5 * (rsp + usp)
+        elbow_fb, medial_fb = _hinge_from_lateral(shoulder, hle, wrist, arm_sign, medial_trunk, elbow_off)
+        medial = _first2(_unit(hme - hle), medial_fb)
+        elbow = _first2(0.5 * (hle + hme), elbow_fb)
+        right = medial if side == 0 else -medial
+        radial = rsp - usp
+        r_wrist = _frame_yz(hand - wrist, radial)
+        pos[J[S_CLAV]], frames[J[S_CLAV]] = sc, _frame_yz(shoulder - sc, c_fwd)
+        pos[J[S_SHOULDER]], frames[J[S_SHOULDER]] = shoulder, _frame_yx(elbow - shoulder, right)
+        pos[J[S_ELBOW]], frames[J[S_ELBOW]] = elbow, _frame_yz(wrist - elbow, radial)
+        pos[J[S_WRIST]], frames[J[S_WRIST]] = wrist, r_wrist
+        pos[J[S_HAND]], frames[J[S_HAND]] = hand, r_wrist
+
+        # legs (3.4.5, 3.4.7)
+        hip = hips[side]
+        fle, fme, ttc = lm[M[M_FLE]], lm[M[M_FME]], lm[M[M_TTC]]
+        fal, tam, fcc, fm2 = lm[M[M_FAL]], lm[M[M_TAM]], lm[M[M_FCC]], lm[M[M_FM2]]
+        knee_fb, kmedial_fb = _hinge_from_lateral(hip, fle, fal, -arm_sign, medial_pelvis, knee_off)
+        kmedial = _first2(_unit(fme - fle), kmedial_fb)
+        # regression e2 signs: + is medial for the left knee and the right ankle (README)
+        knee = _first2(0.5 * (fle + fme), _first2(_regression(fle, fal, ttc, True, -0.1033, arm_sign * 0.09814, 0.0597),
+                                                  knee_fb))
+        amedial = _first2(_unit(tam - fal), _unit(_reject(kmedial, _unit(fal - fle))))
+        ankle = _first2(0.5 * (fal + tam), _first2(_regression(fle, fal, ttc, False, -0.07675, -arm_sign * 0.05482,
+                                                               -0.02741), fal + ankle_off * amedial))
+        foot = _first2(0.4 * fcc + 0.6 * fm2, 0.4 * ankle + 0.6 * fm2)
+        kright = kmedial if side == 0 else -kmedial
+        aright = amedial if side == 0 else -amedial
+        r_foot = _frame_yz(fm2 - foot, knee - ankle)
+        pos[J[S_HIP]], frames[J[S_HIP]] = hip, _frame_yx(knee - hip, hips[1] - hips[0])
+        pos[J[S_KNEE]], frames[J[S_KNEE]] = knee, _frame_yx(ankle - knee, kright)
+        pos[J[S_ANKLE]], frames[J[S_ANKLE]] = ankle, _frame_yx(foot - ankle, aright)
+        pos[J[S_FOOT]], frames[J[S_FOOT]] = foot, r_foot
+        pos[J[S_TOE]], frames[J[S_TOE]] = fm2, r_foot
+
+    # a joint whose position could not be computed is missing, frame included
+    for j in range(pos.shape[0]):
+        if not _ok(pos[j]):
+            pos[j] = np.nan
+            frames[j] = np.nan

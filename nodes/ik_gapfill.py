@@ -13,9 +13,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import LimbSolution, SkeletonFrame
 from mocap_core.gapfill import LIMB_CHAINS, LimbFiller
-from mocap_core.geometry import matrix_to_quat
+from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
+from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
 
@@ -48,6 +49,7 @@ class IkGapfill(Node):
         return {f"skeleton/limb/{params.limb}": LimbSolution}
 
     def setup(self) -> None:
+        warm_up()
         p = self.params
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
                                  load_constraints(p.constraints_file))
@@ -62,6 +64,6 @@ class IkGapfill(Node):
         idx = self.filler.joints
         self.ctx.publish(f"skeleton/limb/{self.params.limb}", LimbSolution(
             header=LimbSolution.make_header(), limb=self.params.limb, joints=self.names,
-            positions=pos[idx].astype(np.float32), orientations=matrix_to_quat(frames[idx]).astype(np.float32),
+            positions=pos[idx].astype(np.float32), orientations=frames_to_quats(frames[idx]).astype(np.float32),
             status=status[idx], solver=self.params.solver, iterations=stats.iterations,
             residual_m=stats.residual_m, solve_time_us=stats.solve_time_us), source=msg)

@@ -6,6 +6,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import MarkerFrame, SkeletonFrame
 from mocap_core.localization import Localizer
 from mocap_core.profiles import LANDMARKS, load_profile
+from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import to_message
 
@@ -22,6 +23,7 @@ class JointLocalization(Node):
     publishes = {"skeleton/localized": SkeletonFrame}
 
     def setup(self) -> None:
+        warm_up()
         self.localizer = Localizer(load_profile(self.params.profile).body)
 
     def on_message(self, topic, msg: MarkerFrame) -> None:

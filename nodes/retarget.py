@@ -9,8 +9,9 @@ import time
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import LimbSolution, SkeletonFrame
-from mocap_core.geometry import quat_to_matrix
+from mocap_core.ik.kernels import quats_to_frames
 from mocap_core.limb_join import LIMBS, FrameJoiner
+from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
 
@@ -28,6 +29,7 @@ class Retarget(Node):
     timer_period_s = 0.005
 
     def setup(self) -> None:
+        warm_up()
         self.joiner = FrameJoiner(self.params.max_wait_ms / 1000)
 
     def on_message(self, topic, msg) -> None:
@@ -36,7 +38,7 @@ class Retarget(Node):
             joined = self.joiner.add_torso(msg.header.frame, now, *from_message(msg), msg)
         else:
             joined = self.joiner.add_limb(msg.header.frame, now, msg.limb, msg.positions.astype(float),
-                                          quat_to_matrix(msg.orientations.astype(float)), msg.status.copy())
+                                          quats_to_frames(msg.orientations.astype(float)), msg.status.copy())
         self._publish(joined)
 
     def on_timer(self) -> None:

@@ -59,6 +59,16 @@ def mtv(M, v):
 
 
 @njit(cache=True)
+def mm(A, B):
+    """3x3 matrix product, written out (numba sends @ on 2-D arrays to BLAS, slow at this size)."""
+    C = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+    return C
+
+
+@njit(cache=True)
 def wrap(a):
     """Angle into [-pi, pi)."""
     return (a + math.pi) % (2 * math.pi) - math.pi
@@ -103,14 +113,14 @@ def rotate_subchain(P, R, i, rot):
     for k in range(i + 1, n + 1):
         P[k] = P[i] + mv(rot, P[k] - P[i])
     for k in range(i, n):
-        R[k] = rot @ R[k]
+        R[k] = mm(rot, R[k])
 
 
 @njit(cache=True)
 def ref_frame(R, ref0, pp, i):
     if i == 0:
-        return ref0 @ pp[0]
-    return R[i - 1] @ pp[i]
+        return mm(ref0, pp[0])
+    return mm(R[i - 1], pp[i])
 
 
 # -- cone limits -------------------------------------------------------------------------------------
@@ -255,3 +265,45 @@ def escape_rotation(P, R, ref0, attempt, step_deg, max_deg):
     angle = math.radians(step_deg * (k // 2 + 1) * (1 if k % 2 == 0 else -1))
     rotate_subchain(P, R, 0, axis_angle(axis / vnorm(axis), angle))
     return True
+
+
+# -- quaternion conversions for the wire (x, y, z, w), per joint ---------------------------------------------
+@njit(cache=True)
+def frames_to_quats(frames):
+    """(J, 3, 3) rotation matrices -> (J, 4) unit quaternions (x, y, z, w), w >= 0; NaN stays NaN."""
+    out = np.empty((frames.shape[0], 4))
+    for j in range(frames.shape[0]):
+        m = frames[j]
+        t = m[0, 0] + m[1, 1] + m[2, 2]
+        if not np.isfinite(t):
+            out[j] = np.nan
+            continue
+        if t > 0:  # Shepperd's method: divide by the largest of the four candidates
+            s = 2.0 * math.sqrt(1.0 + t)
+            q = (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s
+        elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+            s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+            q = 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s
+        elif m[1, 1] > m[2, 2]:
+            s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+            q = (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s
+        else:
+            s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+            q = (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s
+        n = math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
+        sign = -1.0 if q[3] < 0 else 1.0
+        for k in range(4):
+            out[j, k] = sign * q[k] / n
+    return out
+
+
+@njit(cache=True)
+def quats_to_frames(quats):
+    """(J, 4) quaternions (x, y, z, w) -> (J, 3, 3) rotation matrices; NaN stays NaN."""
+    out = np.empty((quats.shape[0], 3, 3))
+    for j in range(quats.shape[0]):
+        x, y, z, w = quats[j, 0], quats[j, 1], quats[j, 2], quats[j, 3]
+        out[j, 0, 0], out[j, 0, 1], out[j, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+        out[j, 1, 0], out[j, 1, 1], out[j, 1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+        out[j, 2, 0], out[j, 2, 1], out[j, 2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+    return out
