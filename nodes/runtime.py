@@ -301,6 +301,7 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
                 if ctx.subscribers_connected():
                     control.send_multipart([b"ready", spec.id.encode()])
                     ready_sent = True
+                    started = started or not node_cls.is_source  # only sources wait for "start"
             if node_cls.is_source and started and not finished:
                 if now >= next_tick:
                     try:

@@ -1,0 +1,75 @@
+"""Gap filling on a real take: hide markers that are really there and compare with the truth."""
+import numpy as np
+import pytest
+
+from mocap_core.gapfill import GapFiller, LimbFiller
+from mocap_core.hip_interpolation import HipInterpolator
+from mocap_core.localization import Localizer
+from mocap_core.profiles import LANDMARK_INDEX, load_profile
+from mocap_core.recordings import read_recording
+from mocap_core.skeleton import INDEX, Status
+from mocap_core.ik.solvers import SOLVERS
+from tests.conftest import data_file
+
+
+@pytest.fixture(scope="module")
+def walk():
+    rec = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
+    prof = load_profile("qualisys_sports")
+    lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
+    return lm, prof
+
+
+def localized(lm, prof):
+    loc = Localizer(prof.body).localize(lm)
+    return loc.positions, loc.frames, loc.status
+
+
+@pytest.mark.parametrize("solver", sorted(SOLVERS))
+def test_hidden_elbow_is_estimated_near_the_truth(walk, solver):
+    lm, prof = walk
+    truth, _, _ = localized(lm, prof)
+    hidden = lm.copy()
+    hidden[100:, [LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]]] = np.nan
+    pos, frames, status = localized(hidden, prof)
+    filler = GapFiller(solver)
+    for f in range(len(pos)):
+        filler.fill(pos[f], frames[f], status[f])
+    e = INDEX["elbow_l"]
+    assert (status[:100, e] == Status.LOCATED).all() and (status[100:, e] == Status.ESTIMATED).all()
+    err = np.linalg.norm(pos[100:, e] - truth[100:, e], axis=1)
+    assert err.mean() < 0.06, f"{solver}: mean elbow error {err.mean() * 1000:.0f} mm"
+    # bone lengths come from the last complete frame and are kept
+    upper = np.linalg.norm(pos[100:, e] - pos[100:, INDEX["shoulder_l"]], axis=1)
+    assert upper.std() < 0.01
+    # the wrist (the target) keeps its measured position
+    np.testing.assert_array_equal(pos[100:, INDEX["wrist_l"]], truth[100:, INDEX["wrist_l"]])
+
+
+def test_missing_end_effector_is_held_relative_to_its_parent(walk):
+    lm, prof = walk
+    hidden = lm.copy()
+    hidden[150:, LANDMARK_INDEX["R_HM2"]] = np.nan
+    pos, frames, status = localized(hidden, prof)
+    filler = LimbFiller("right_arm")
+    for f in range(len(pos)):
+        filler.fill(pos[f], frames[f], status[f])
+    h, w = INDEX["hand_r"], INDEX["wrist_r"]
+    assert (status[150:, h] == Status.HELD).all()
+    # the hand keeps its offset in the frame of the wrist's parent chain: constant distance to the wrist
+    d = np.linalg.norm(pos[150:, h] - pos[150:, w], axis=1)
+    assert d.std() < 1e-6
+
+
+def test_nothing_is_invented_before_the_limb_was_seen_whole(walk):
+    lm, prof = walk
+    hidden = lm.copy()
+    hidden[:50, LANDMARK_INDEX["L_FLE"]] = np.nan
+    hidden[:50, LANDMARK_INDEX["L_FME"]] = np.nan
+    hidden[:50, LANDMARK_INDEX["L_TTC"]] = np.nan
+    pos, frames, status = localized(hidden, prof)
+    filler = LimbFiller("left_leg")
+    for f in range(len(pos)):
+        filler.fill(pos[f], frames[f], status[f])
+    assert (status[:50, INDEX["knee_l"]] == Status.MISSING).all()
+    assert (status[50:, INDEX["knee_l"]] == Status.LOCATED).all()
