@@ -3,7 +3,8 @@ from __future__ import annotations
 
 
 def register(sub) -> None:
-    from mocap_cli import demo, solve
+    from mocap_cli import demo, eval_cmd, solve
 
     solve.add_parser(sub)
+    eval_cmd.add_parser(sub)
     demo.add_parser(sub)

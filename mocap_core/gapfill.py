@@ -23,9 +23,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from numba import njit
+
 from mocap_core.ik.constraints import Constraints, load_constraints
-from mocap_core.ik.solvers import ChainLimits, Solver, SolverParams, get_solver
+from mocap_core.ik.kernels import mm, mv
+from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
+from mocap_core.ik.solvers_kernels import solve
 from mocap_core.skeleton import INDEX, LIMBS, PARENT, Status
+
+MISSING, ESTIMATED, HELD = int(Status.MISSING), int(Status.ESTIMATED), int(Status.HELD)
 
 # The first joint of each limb chain; its position comes from the stage before.
 LIMB_CHAINS: dict[str, tuple[str, ...]] = {
@@ -50,7 +56,7 @@ class FillStats:
 class LimbFiller:
     """Fills the gaps of one limb frame after frame. Owns the limb's previous solved chain."""
 
-    def __init__(self, limb: str, solver: Solver | str = "ccd", params: SolverParams | None = None,
+    def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
@@ -58,84 +64,104 @@ class LimbFiller:
         self.solver = get_solver(solver) if isinstance(solver, str) else solver
         self.params = params or SolverParams()
         self.constraints = constraints or load_constraints()
-        self.joints = np.array([INDEX[j] for j in LIMB_CHAINS[limb]])
+        self.joints = np.array([INDEX[j] for j in LIMB_CHAINS[limb]], dtype=np.int64)
         self.parent_of_root = INDEX[PARENT[LIMB_CHAINS[limb][0]]]
-        self.prev_pos: np.ndarray | None = None     # (n, 3) last output of the limb's joints
-        self.prev_frames: np.ndarray | None = None  # (n, 3, 3)
-        self.prev_parent_frame: np.ndarray | None = None
+        n = len(self.joints)
+        self.prev_pos = np.full((n, 3), np.nan)        # the limb's last whole output
+        self.prev_frames = np.full((n, 3, 3), np.nan)
+        self.prev_parent_frame = np.full((3, 3), np.nan)
+        self.has_prev = np.zeros(1, bool)
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                            c.twists[self.joints], c.has_twist[self.joints])
 
-    def _limits(self, root: int, last: int, ref0: np.ndarray) -> ChainLimits:
-        pp, cones, has_cone, twists, has_twist = (a[root:last] for a in self._limits_of)
-        return ChainLimits(np.ascontiguousarray(ref0), pp, cones, has_cone, twists, has_twist)
-
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> FillStats:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton)."""
-        stats = FillStats()
-        idx = self.joints
-        parent_frame = frames[self.parent_of_root]
-        missing = status[idx] == Status.MISSING
-        have_history = self.prev_pos is not None and np.isfinite(parent_frame).all()
-        if missing.any() and have_history and status[idx[0]] != Status.MISSING:
-            t0 = time.perf_counter()
-            self._fill_runs(positions, frames, status, missing, parent_frame, stats)
-            stats.solve_time_us = (time.perf_counter() - t0) * 1e6
-        pos = positions[idx]
-        if np.isfinite(pos).all() and np.isfinite(parent_frame).all():
-            self.prev_pos = pos.astype(np.float64).copy()
-            fr = frames[idx].astype(np.float64).copy()
-            # a located end joint may lack a frame (no child seen): keep the previous one
-            if self.prev_frames is not None:
-                bad = ~np.isfinite(fr).all(axis=(1, 2))
-                fr[bad] = self.prev_frames[bad]
-            self.prev_frames = fr
-            self.prev_parent_frame = np.array(parent_frame, dtype=np.float64)
-        return stats
+        t0 = time.perf_counter()
+        out = np.zeros(4)
+        p = self.params
+        _fill_limb(positions, frames, status, self.joints, self.parent_of_root, self.limb.endswith("arm"),
+                   self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
+                   self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
+                   p.escape_max_deg, out)
+        took_us = (time.perf_counter() - t0) * 1e6
+        return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 
-    def _fill_runs(self, positions, frames, status, missing, parent_frame, stats: FillStats) -> None:
-        idx, n = self.joints, len(self.joints)
+
+@njit(cache=True)
+def _all_finite(a):
+    for v in a.ravel():
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_frames, prev_parent, has_prev,
+               pp, cones, has_cone, twists, has_twist, solver, constrained, max_iter, stop_m, esc_step, esc_max,
+               out):
+    """Algorithm 1 for one limb, in place. out = [estimated, held, iterations, max residual m]."""
+    n = idx.shape[0]
+    parent_frame = frames[parent].copy()
+    if status[idx[0]] == MISSING and is_arm and status[parent] != MISSING:
+        # the clavicle joint sits on the sternum-clavicle point, its parent's position (facts 9.1)
+        positions[idx[0]] = positions[parent]
+        status[idx[0]] = ESTIMATED
+    parent_ok = _all_finite(parent_frame)
+    if has_prev[0] and parent_ok and status[idx[0]] != MISSING:
         i = 1
         while i < n:
-            if not missing[i]:
+            if status[idx[i]] != MISSING:
                 i += 1
                 continue
-            root = i - 1
-            t = i
-            while t < n and missing[t]:
+            root, t = i - 1, i
+            while t < n and status[idx[t]] == MISSING:
                 t += 1
-            # previous chain from root to the target (or to the limb's end), moved onto the current root
             last = t if t < n else n - 1
-            chain = np.arange(root, last + 1)
-            P = self.prev_pos[chain] - self.prev_pos[root] + positions[idx[root]]
-            R = self.prev_frames[chain[:-1]].copy()
-            ref0 = parent_frame if root == 0 else frames[idx[root - 1]]
-            if not np.isfinite(ref0).all():
+            m = last - root  # bones in the chain
+            # the previous chain from root to target (or to the limb's end), moved onto the current root
+            P = np.empty((m + 1, 3))
+            for k in range(m + 1):
+                P[k] = prev_pos[root + k] - prev_pos[root] + positions[idx[root]]
+            R = prev_frames[root:last].copy()
+            ref0 = parent_frame if root == 0 else frames[idx[root - 1]].copy()
+            if not _all_finite(ref0):
                 ref0 = parent_frame
             if t < n:
-                result = self.solver.solve(P, R, positions[idx[t]].astype(np.float64),
-                                           self._limits(root, last, ref0), self.params)
-                stats.iterations += result.iterations
-                stats.residual_m = max(stats.residual_m, result.residual_m)
-                filled = chain[1:-1]
-                code = Status.ESTIMATED
+                target = positions[idx[t]].astype(np.float64)
+                it, res = solve(solver, P, R, target, ref0, pp[root:last], cones[root:last], has_cone[root:last],
+                                twists[root:last], has_twist[root:last], constrained, max_iter, stop_m, esc_step,
+                                esc_max)
+                out[2] += it
+                out[3] = max(out[3], res)
+                first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position
             else:
-                # no target: keep the last rotation relative to the parent (rigid carry)
-                turn = parent_frame @ self.prev_parent_frame.T
-                P = positions[idx[root]] + (self.prev_pos[chain] - self.prev_pos[root]) @ turn.T
-                R = turn @ self.prev_frames[chain[:-1]]
-                frames[idx[last]] = turn @ self.prev_frames[last]
-                filled = chain[1:]
-                code = Status.HELD
-            positions[idx[filled]] = P[filled - root]
-            frames[idx[chain[:-1]]] = R
-            status[idx[filled]] = code
-            if code == Status.ESTIMATED:
-                stats.estimated += len(filled)
-            else:
-                stats.held += len(filled)
+                # no target: keep the last rotation relative to the parent (a rigid carry)
+                turn = mm(parent_frame, prev_parent.T.copy())
+                for k in range(m + 1):
+                    P[k] = positions[idx[root]] + mv(turn, prev_pos[root + k] - prev_pos[root])
+                for k in range(m):
+                    R[k] = mm(turn, prev_frames[root + k])
+                frames[idx[last]] = mm(turn, prev_frames[last])
+                first, stop, code = 1, m + 1, HELD
+            for k in range(first, stop):
+                positions[idx[root + k]] = P[k]
+                status[idx[root + k]] = code
+                out[0 if code == ESTIMATED else 1] += 1
+            for k in range(m):
+                frames[idx[root + k]] = R[k]
             i = t + 1
+    # remember this frame's limb as the next frame's starting chain, if it is whole
+    whole = parent_ok
+    for k in range(n):
+        whole = whole and _all_finite(positions[idx[k]])
+    if whole:
+        for k in range(n):
+            prev_pos[k] = positions[idx[k]]
+            if _all_finite(frames[idx[k]]) or not has_prev[0]:
+                prev_frames[k] = frames[idx[k]]  # an end joint without a frame keeps its previous one
+        prev_parent[:] = parent_frame
+        has_prev[0] = True
 
 
 class GapFiller:

@@ -42,6 +42,7 @@ DEFAULT_HALF_SHOULDER_WIDTH_MM = 200.0
 # and the width fallbacks lean on the pelvis/chest lateral axis instead (blend up to +0.25).
 STRAIGHT_SIN = 0.17
 
+LOCATED, MISSING = int(Status.LOCATED), int(Status.MISSING)
 # Landmark and joint indices as plain ints, frozen into the compiled kernel.
 SACR, L_IAS, R_IAS, TV12, TV2, SME, SGL = (_L[n] for n in ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "SGL"))
 HEAD_MARK = np.array([_L["L_HEAD"], _L["R_HEAD"]])
@@ -94,11 +95,11 @@ class Localizer:
         if lm.ndim == 2:
             lm = lm[None]
         n = lm.shape[0]
-        pos = np.full((n, N_JOINTS, 3), np.nan)
-        frames = np.full((n, N_JOINTS, 3, 3), np.nan)
+        pos = np.empty((n, N_JOINTS, 3))         # the kernel writes every joint
+        frames = np.empty((n, N_JOINTS, 3, 3))
+        status = np.empty((n, N_JOINTS), np.uint8)
         body_used = np.empty((n, 4))
-        _localize_batch(lm, pos, frames, body_used, self._body, self.estimate.sums, self.estimate.counts)
-        status = np.where(np.isnan(pos).any(axis=-1), Status.MISSING, Status.LOCATED).astype(np.uint8)
+        _localize_batch(lm, pos, frames, status, body_used, self._body, self.estimate.sums, self.estimate.counts)
         return Localized(pos, frames, status, *body_used.T)
 
 
@@ -216,9 +217,11 @@ def _running(sums, counts, k0, k1, ci, sample):
 
 # -- the kernel -----------------------------------------------------------------------------------------
 @njit(cache=True)
-def _localize_batch(lms, pos, frames, body_used, body, sums, counts):
+def _localize_batch(lms, pos, frames, status, body_used, body, sums, counts):
     for f in range(lms.shape[0]):
         _localize_frame(lms[f], pos[f], frames[f], body_used[f], body, sums, counts)
+        for j in range(pos.shape[1]):
+            status[f, j] = LOCATED if _ok(pos[f, j]) else MISSING
 
 
 @njit(cache=True)

@@ -87,33 +87,42 @@ def axis_angle(axis, angle):
 
 @njit(cache=True)
 def rotation_between(a, b):
-    """Shortest-arc rotation carrying direction a onto direction b."""
-    na, nb = vnorm(a), vnorm(b)
+    """Shortest-arc rotation carrying direction a onto direction b (scalar code: no temporaries)."""
+    na = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    nb = math.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
     if na < EPS or nb < EPS:
         return np.eye(3)
-    a = a / na
-    b = b / nb
-    c = vdot(a, b)
-    axis = vcross(a, b)
-    s = vnorm(axis)
+    ax, ay, az = a[0] / na, a[1] / na, a[2] / na
+    bx, by, bz = b[0] / nb, b[1] / nb, b[2] / nb
+    c = ax * bx + ay * by + az * bz
+    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    s = math.sqrt(cx * cx + cy * cy + cz * cz)
     if s < 1e-12:
         if c > 0:
             return np.eye(3)
         # opposite: half turn about any axis perpendicular to a
-        helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        axis = vcross(a, helper)
+        helper = np.array([1.0, 0.0, 0.0]) if abs(ax) < 0.9 else np.array([0.0, 1.0, 0.0])
+        axis = vcross(np.array([ax, ay, az]), helper)
         return axis_angle(axis / vnorm(axis), math.pi)
-    return axis_angle(axis / s, math.atan2(s, c))
+    return axis_angle(np.array([cx / s, cy / s, cz / s]), math.atan2(s, c))
 
 
 @njit(cache=True)
 def rotate_subchain(P, R, i, rot):
     """Rotate joints i+1.. about P[i], and bone frames i.. (the sub-chain that bone i carries)."""
     n = R.shape[0]
+    ox, oy, oz = P[i, 0], P[i, 1], P[i, 2]
     for k in range(i + 1, n + 1):
-        P[k] = P[i] + mv(rot, P[k] - P[i])
+        x, y, z = P[k, 0] - ox, P[k, 1] - oy, P[k, 2] - oz
+        P[k, 0] = ox + rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z
+        P[k, 1] = oy + rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z
+        P[k, 2] = oz + rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z
     for k in range(i, n):
-        R[k] = mm(rot, R[k])
+        for col in range(3):
+            x, y, z = R[k, 0, col], R[k, 1, col], R[k, 2, col]
+            R[k, 0, col] = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z
+            R[k, 1, col] = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z
+            R[k, 2, col] = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z
 
 
 @njit(cache=True)

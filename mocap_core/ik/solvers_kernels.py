@@ -16,6 +16,9 @@ from mocap_core.ik.kernels import (EPS, axis_angle, constrain_bone, constrain_ch
 
 CCD, FABRIK, JACOBIAN_TRANSPOSE, DLS = 0, 1, 2, 3
 DLS_LAMBDA = 1.1  # thesis 3.5.1
+# An iteration that brings the end effector less than 1% closer counts as a stall: two in a row
+# trigger the deadlock escape (crawling along a joint limit costs time and gains nothing visible).
+MIN_PROGRESS = 0.01
 
 
 @njit(cache=True)
@@ -126,12 +129,14 @@ def _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
 
 @njit(cache=True)
 def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained,
-          max_iter, stop_m, escape_step_deg, escape_max_deg):
+          max_iter, stop_m, escape_step_deg, escape_max_deg, escape_patience=4):
     """Run a solver on the chain in place; returns (iterations, residual distance in metres).
 
     An unreachable target (farther than the chain is long) gets the chain stretched straight at
     it, as in the thesis's code, then limited. When the distance stops shrinking the deadlock
-    escape turns the whole chain and the solver goes on; the best pose seen is kept."""
+    escape turns the whole chain and the solver goes on; the best pose seen is kept. After
+    ``escape_patience`` escapes in a row that gain less than a millimetre the target is taken as
+    out of reach within the limits, and the best pose is returned."""
     n = R.shape[0]
     total = 0.0
     for i in range(n):
@@ -148,6 +153,8 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
     last = best
     stalls = 0
     attempt = 0
+    fruitless = 0
+    best_at_escape = best
     it = 0
     while it < max_iter and best > stop_m:
         _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
@@ -157,12 +164,16 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
             best = dist
             bestP[:] = P
             bestR[:] = R
-        if dist > last - 1e-6 * max(last, 1e-3) and dist > stop_m:
+        if dist > last * (1.0 - MIN_PROGRESS) and dist > stop_m:
             stalls += 1
             if stalls >= 2:
                 stalls = 0
                 P[:] = bestP
                 R[:] = bestR
+                fruitless = fruitless + 1 if best > best_at_escape - 1e-3 else 0
+                best_at_escape = best
+                if fruitless > escape_patience:
+                    break
                 if not escape_rotation(P, R, ref0, attempt, escape_step_deg, escape_max_deg):
                     break
                 attempt += 1

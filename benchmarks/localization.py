@@ -1,0 +1,53 @@
+"""Per-frame cost of the stages that run on every frame (issue 3's budget: localization <= 50 us).
+
+    python benchmarks/localization.py
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from mocap_core.hip_interpolation import HIP_INDEX, HipInterpolator  # noqa: E402
+from mocap_core.localization import Localizer  # noqa: E402
+from mocap_core.profiles import load_profile  # noqa: E402
+from mocap_core.recordings import read_recording  # noqa: E402
+from mocap_core.warmup import warm_up  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def per_call_us(fn, n, repeats=5):
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for i in range(n):
+            fn(i)
+        best = min(best, (time.perf_counter() - t) / n * 1e6)
+    return best
+
+
+def main():
+    warm_up()
+    for file, profile in [("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports"),
+                          ("08_cmu_135_02_karate_kata.c3d", "cmu41")]:
+        rec = read_recording(DATA / file)
+        prof = load_profile(profile)
+        lmap = prof.resolve(rec.labels)
+        lm = lmap.apply(rec.positions[:300])
+        loc = Localizer(prof.body)
+        hips = HipInterpolator()
+        n = len(lm)
+        print(f"{file} ({len(rec.labels)} markers), best of 5 passes over {n} frames, us per frame:")
+        print(f"  profile -> landmarks       {per_call_us(lambda i: lmap.apply(rec.positions[i]), n):7.1f}")
+        print(f"  hip interpolation          {per_call_us(lambda i: hips.fill(lm[i][HIP_INDEX]), n):7.1f}")
+        print(f"  localization, one frame    {per_call_us(lambda i: loc.localize(lm[i]), n):7.1f}  (target <= 50)")
+        batch = per_call_us(lambda i: loc.localize(lm), 1) / n
+        print(f"  localization, batch of {n}  {batch:7.1f}")
+
+
+if __name__ == "__main__":
+    main()

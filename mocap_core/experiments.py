@@ -1,0 +1,84 @@
+"""The thesis's experiments (chapter 4) as plain functions; `mocap eval` prints and plots them."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocap_core.gapfill import GapFiller
+from mocap_core.ik.solvers import SolverParams
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.profiles import Profile
+from mocap_core.recordings import Recording
+from mocap_core.skeleton import END_SITES, INDEX, JOINTS, Status
+
+# What the worst case keeps (thesis 4.3: "all joints except the end-effectors and the pelvis"). The
+# pelvis segment here is the pelvis with spine0 and both hip centres: all four come from the same
+# three pelvis markers, and IK chains need a located root.
+WORST_CASE_KEEP = frozenset({"pelvis", "spine0", "hip_l", "hip_r"} | END_SITES)
+WORST_CASE_REMOVE = np.array([INDEX[j] for j in JOINTS if j not in WORST_CASE_KEEP])
+
+# Thesis Tables 4.2 and 4.3 (ms per frame, C# on an Intel i3 M 370).
+THESIS_TIMING_MS = {
+    ("jacobian_transpose", False): (0.17, 2.59, 0.6, 0.48, 0.39),
+    ("dls", False): (0.17, 4.16, 0.54, 0.43, 0.37),
+    ("fabrik", False): (0.17, 3.24, 0.24, 0.23, 0.13),
+    ("ccd", False): (0.16, 1.07, 0.41, 0.24, 0.28),
+    ("jacobian_transpose", True): (0.17, 23.21, 3.69, 1.86, 3.59),
+    ("dls", True): (0.17, 24.69, 3.48, 1.6, 3.65),
+    ("fabrik", True): (2.42, 60.41, 22.03, 19.71, 12.23),
+    ("ccd", True): (0.16, 5.08, 1.4, 0.72, 1.27),
+}
+
+
+@dataclass
+class TimingRow:
+    solver: str
+    constraints: bool
+    frames: int
+    min_ms: float
+    max_ms: float
+    mean_ms: float
+    median_ms: float
+    std_ms: float
+    mean_iterations: float
+    mean_residual_mm: float
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def localize_take(rec: Recording, profile: Profile):
+    pipe = SkeletonPipeline(profile, rec.labels, fill_gaps=False)
+    chunk = pipe.solve_landmarks(pipe.landmarks(rec.positions))
+    return chunk.positions, chunk.frames, chunk.status
+
+
+def worst_case_timing(localized, solver: str, constraints: bool, params: SolverParams | None = None,
+                      repeats: int = 1) -> TimingRow:
+    """Time the full-body gap fill of every frame with every joint but the kept ones removed.
+    Frame 0 stays complete: the IK chains start from the previous frame's solution (thesis 3.6)."""
+    pos0, frames0, status0 = localized
+    params = params or SolverParams()
+    params = SolverParams(params.max_iterations, params.stop_distance_m, constraints, params.escape_step_deg,
+                          params.escape_max_deg)
+    times, iters, resid = [], [], []
+    for _ in range(repeats):
+        filler = GapFiller(solver, params)
+        for f in range(len(pos0)):
+            pos, frames, status = pos0[f].copy(), frames0[f].copy(), status0[f].copy()
+            if f > 0:
+                pos[WORST_CASE_REMOVE] = np.nan
+                frames[WORST_CASE_REMOVE] = np.nan
+                status[WORST_CASE_REMOVE] = Status.MISSING
+            t = time.perf_counter()
+            stats = filler.fill(pos, frames, status)
+            dt = time.perf_counter() - t
+            if f > 0:
+                times.append(dt * 1000)
+                iters.append(sum(s.iterations for s in stats.values()))
+                resid.append(max(s.residual_m for s in stats.values()) * 1000)
+    t = np.array(times)
+    return TimingRow(solver, constraints, len(t), t.min(), t.max(), t.mean(), float(np.median(t)), t.std(),
+                     float(np.mean(iters)), float(np.mean(resid)))
