@@ -3,8 +3,9 @@ from __future__ import annotations
 
 
 def register(sub) -> None:
-    from mocap_cli import demo, eval_cmd, solve
+    from mocap_cli import demo, eval_cmd, qtm_sim, solve
 
     solve.add_parser(sub)
+    qtm_sim.add_parser(sub)
     eval_cmd.add_parser(sub)
     demo.add_parser(sub)

@@ -11,6 +11,7 @@ KINDS: dict[str, str] = {
     "relay": "nodes.relay:Relay",
     "frame_log": "nodes.frame_log:FrameLog",
     "file_source": "nodes.file_source:FileSource",
+    "qtm_ingest": "nodes.qtm_ingest:QtmIngest",
     "hip_interpolation": "nodes.hip_interpolation:HipInterpolation",
     "joint_localization": "nodes.joint_localization:JointLocalization",
     "ik_gapfill": "nodes.ik_gapfill:IkGapfill",

@@ -1,0 +1,150 @@
+"""Stage 1 (live): labelled markers from Qualisys Track Manager, through the official ``qtm-rt`` client.
+
+The client is asyncio; it runs in a thread of its own and hands frames to the node over a queue,
+so the node's loop (heartbeats, publishing) never waits on the network. Labels and rate come from
+the 3D and General parameters at every (re)connection; a label change publishes a new MarkerSet.
+When QTM goes away the thread reconnects with backoff (0.5 s doubling to 5 s) and says so. A bad
+packet is counted and skipped; nothing from the network can stop the node.
+"""
+from __future__ import annotations
+
+import asyncio
+import queue
+import threading
+import time
+import xml.etree.ElementTree as ET
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet
+from nodes.runtime import Node
+
+UNITS_M = 0.001  # QTM streams millimetres
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    host: str = "127.0.0.1"
+    port: int = Field(22223, ge=1, le=65535)
+    version: str = "1.25"
+    frames: str = Field("allframes", description="allframes, frequency:N or frequencydivisor:N")
+    timeout_s: float = Field(5.0, gt=0)
+    max_backoff_s: float = Field(5.0, gt=0)
+
+
+class QtmIngest(Node):
+    kind = "qtm_ingest"
+    Params = Params
+    publishes = {"markers/raw": MarkerFrame, "markers/set": MarkerSet}
+    is_source = True
+
+    def setup(self) -> None:
+        self.inbox: queue.Queue = queue.Queue(maxsize=10000)
+        self.labels: list[str] = []
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._client_thread, name="qtm-rt", daemon=True)
+        self.thread.start()
+
+    def tick(self) -> float | None:
+        try:
+            item = self.inbox.get(timeout=0.05)
+        except queue.Empty:
+            return 0.0
+        while True:
+            kind, payload = item
+            if kind == "set":
+                self.labels, rate = payload
+                self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=self.labels,
+                                                          rate_hz=rate, source=f"qtm://{self.params.host}"))
+            elif kind == "frame":
+                self._publish_frame(*payload)
+            elif kind == "error":
+                self.ctx._error(payload[0], payload[1])
+            try:
+                item = self.inbox.get_nowait()
+            except queue.Empty:
+                return 0.0
+
+    def _publish_frame(self, frame: int, timestamp_us: int, xyz_mm: np.ndarray, received_ns: int) -> None:
+        if xyz_mm.shape[0] != len(self.labels):
+            self.ctx._error("label_count", f"frame {frame}: {xyz_mm.shape[0]} markers for {len(self.labels)} labels")
+            return
+        pos = (xyz_mm * UNITS_M).astype(np.float32)
+        flags = np.where(np.isnan(pos).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
+        self.ctx.publish("markers/raw", MarkerFrame(
+            header=MarkerFrame.make_header(frame, timestamp_us / 1e6, received_ns), labels=self.labels,
+            positions=pos, flags=flags))
+
+    def teardown(self) -> None:
+        self.stopping.set()
+        self.thread.join(timeout=1.0)
+
+    # -- the qtm-rt side, in its own thread ------------------------------------------------------------
+    def _client_thread(self) -> None:
+        asyncio.run(self._client_loop())
+
+    async def _client_loop(self) -> None:
+        import qtm_rt
+
+        p = self.params
+        backoff = 0.5
+        was_connected = False
+        while not self.stopping.is_set():
+            lost = asyncio.Event()
+            conn = await qtm_rt.connect(p.host, port=p.port, version=p.version, timeout=p.timeout_s,
+                                        on_disconnect=lambda exc: lost.set(), on_event=self._on_event)
+            if conn is None:
+                self.log.warning("QTM at %s:%d not reachable; retrying in %.1f s", p.host, p.port, backoff)
+                await self._sleep(backoff)
+                backoff = min(backoff * 2, p.max_backoff_s)
+                continue
+            try:
+                root = ET.fromstring(await conn.get_parameters(parameters=["general", "3d"]))
+                labels = [e.text or "" for e in root.findall("The_3D/Label/Name")]
+                rate = float(root.findtext("General/Frequency") or 0)
+                if labels != self.labels or not was_connected:
+                    self.log.info("QTM %s:%d: %d labels at %.0f Hz%s", p.host, p.port, len(labels), rate,
+                                  " (labels changed)" if was_connected and labels != self.labels else "")
+                self.inbox.put(("set", (labels, rate)))
+                await conn.stream_frames(frames=p.frames, components=["3d"], on_packet=self._on_packet)
+                was_connected, backoff = True, 0.5
+                while not lost.is_set() and not self.stopping.is_set():
+                    await asyncio.sleep(0.1)
+                if lost.is_set():
+                    self.log.warning("lost the connection to QTM at %s:%d; reconnecting", p.host, p.port)
+            except Exception as e:  # a QTM that answers nonsense: count it, wait, try again
+                self.inbox.put(("error", ("qtm_session", f"QTM session failed: {e!r}")))
+                await self._sleep(backoff)
+                backoff = min(backoff * 2, p.max_backoff_s)
+            finally:
+                try:
+                    conn.disconnect()
+                except Exception:
+                    pass
+
+    async def _sleep(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and not self.stopping.is_set():
+            await asyncio.sleep(0.05)
+
+    def _on_packet(self, packet) -> None:
+        received = time.time_ns()
+        try:
+            comp = packet.get_3d_markers()
+            if comp is None:
+                return
+            _, markers = comp
+            xyz = np.array([(m.x, m.y, m.z) for m in markers], dtype=np.float64).reshape(-1, 3)
+            self.inbox.put_nowait(("frame", (packet.framenumber, packet.timestamp, xyz, received)))
+        except queue.Full:
+            self.dropped_full = getattr(self, "dropped_full", 0) + 1  # the node is not keeping up
+        except Exception as e:
+            try:
+                self.inbox.put_nowait(("error", ("bad_packet", f"bad QTM packet: {e!r}")))
+            except queue.Full:
+                pass
+
+    def _on_event(self, event) -> None:
+        name = getattr(event, "name", str(event))
+        self.log.info("QTM event: %s", name)
