@@ -1,0 +1,70 @@
+"""QTM emulator -> qtm_ingest -> subscriber at 1000 Hz (issue 5): drops and latency.
+
+    python benchmarks/qtm_ingest.py [--seconds 60] [--rate 1000]
+
+Latency is from the moment the ingest node received the frame from QTM (the header's entry time)
+to the subscriber; drops are gaps in the publisher's sequence numbers plus frames the emulator
+sent that never arrived.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from mocap_cli.launch_file import LaunchFile  # noqa: E402
+from mocap_cli.launcher import Launcher  # noqa: E402
+
+TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=60)
+    ap.add_argument("--rate", type=float, default=1000)
+    args = ap.parse_args()
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    tmp = Path(tempfile.mkdtemp())
+    ready = tmp / "port"
+    sim = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "--log-level", "WARNING", "qtm-sim", str(TAKE),
+                            "--port", str(port), "--rate", str(args.rate), "--loop", "--ready-file", str(ready)],
+                           cwd=REPO)
+    while not ready.exists():
+        time.sleep(0.05)
+    out = tmp / "raw.csv"
+    lf = LaunchFile.model_validate({"name": f"bench-qtm-{os.getpid()}", "nodes": [
+        {"id": "qtm", "kind": "qtm_ingest", "params": {"port": port}},
+        {"id": "sink", "kind": "frame_log", "params": {"path": str(out)}, "remaps": {"in": "markers/raw"}}]})
+    try:
+        Launcher(lf).run(duration_s=args.seconds)
+    finally:
+        sim.send_signal(signal.SIGINT)
+        sim.wait()
+    with open(out) as f:
+        rows = list(csv.DictReader(f))
+    seq = np.array([int(r["seq"]) for r in rows])
+    lat = np.array([float(r["latency_us"]) for r in rows])
+    gaps = int((np.diff(seq) - 1).clip(min=0).sum())
+    span = (seq[-1] - seq[0] + 1)
+    print(f"{len(rows)} frames in {args.seconds:.0f} s at {args.rate:.0f} Hz requested "
+          f"({len(rows) / args.seconds:.0f} Hz received over the run, including start-up)")
+    print(f"dropped between ingest and subscriber (sequence gaps): {gaps} of {span}")
+    print(f"latency ingest -> subscriber: p50 {np.percentile(lat, 50):.0f} us, p99 {np.percentile(lat, 99):.0f} us, "
+          f"max {lat.max():.0f} us")
+
+
+if __name__ == "__main__":
+    main()

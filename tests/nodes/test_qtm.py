@@ -1,0 +1,153 @@
+"""The official qtm-rt client against our QTM emulator over real TCP, and the ingest node's recovery."""
+import asyncio
+import csv
+import math
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from contextlib import contextmanager
+
+import numpy as np
+import qtm_rt
+
+from mocap_core.recordings import read_recording
+from tests.conftest import REPO, data_file, launched, wait_for
+
+TAKE = "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"  # real gaps: NaN must come through
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def emulator(tmp_path, *args, port=0, file=TAKE):
+    ready = tmp_path / f"port-{os.getpid()}-{port}"
+    ready.unlink(missing_ok=True)
+    log = open(tmp_path / "qtm_sim.log", "a")
+    proc = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "qtm-sim", str(data_file(file)), "--port",
+                             str(port), "--ready-file", str(ready), *args], cwd=REPO, stdout=log,
+                            stderr=subprocess.STDOUT)
+    try:
+        wait_for(lambda: ready.exists() and ready.read_text(), 20, "the emulator to listen")
+        yield proc, int(ready.read_text())
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        log.close()
+
+
+def test_qtm_rt_client_receives_the_take_exactly(tmp_path):
+    rec = read_recording(data_file(TAKE))
+
+    async def session(port):
+        stopped = asyncio.Event()
+
+        def on_event(ev):
+            if ev == qtm_rt.QRTEvent.EventRTfromFileStopped:
+                stopped.set()
+
+        conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25", timeout=5, on_event=on_event)
+        assert conn is not None
+        assert (await conn.byte_order()) == b"Byte order is little endian"
+        root = ET.fromstring(await conn.get_parameters(parameters=["general", "3d"]))
+        labels = [e.text for e in root.findall("The_3D/Label/Name")]
+        freq = float(root.findtext("General/Frequency"))
+        frames = []
+        assert await conn.stream_frames(components=["3d"], on_packet=frames.append) == b"Ok"
+        await asyncio.wait_for(stopped.wait(), 30)
+        try:
+            await conn.get_current_frame(components=["6d"])  # valid for the SDK, not in this measurement
+            error = None
+        except qtm_rt.QRTCommandException as e:
+            error = e.value
+        conn.disconnect()
+        return labels, freq, frames, error
+
+    with emulator(tmp_path, "--rate", "1000") as (_, port):
+        labels, freq, packets, error = asyncio.run(session(port))
+    assert labels == rec.labels and freq == rec.rate_hz
+    assert error == b"Component 6d is not available in this measurement"
+    assert [p.framenumber for p in packets] == list(range(rec.n_frames))
+    assert [p.timestamp for p in packets] == [round(i / rec.rate_hz * 1e6) for i in range(rec.n_frames)]
+    got = np.array([[(m.x, m.y, m.z) for m in p.get_3d_markers()[1]] for p in packets])
+    want = (rec.positions.astype(np.float64) * 1000).astype(np.float32)
+    assert np.array_equal(np.isnan(got), np.isnan(want)) and np.isnan(want).any()
+    np.testing.assert_allclose(got[~np.isnan(want)], want[~np.isnan(want)], rtol=1e-6)
+
+
+def test_occluded_markers_are_all_ones_and_garbage_clients_are_dropped(tmp_path):
+    with emulator(tmp_path, "--hide", "Nick01:LFHD:0-5000", "--rate", "500") as (proc, port):
+        with socket.create_connection(("127.0.0.1", port)) as s:
+            s.settimeout(5)
+            welcome = s.recv(64)
+            assert welcome == struct.pack("<II", 8 + 27, 1) + b"QTM RT Interface connected\0"
+            cmd = b"getcurrentframe 3d\0"
+            s.sendall(struct.pack("<II", 8 + len(cmd), 1) + cmd)
+            head = b""
+            while len(head) < 8:
+                head += s.recv(8 - len(head))
+            size, kind = struct.unpack("<II", head)
+            while kind != 3:  # skip the event the measurement start broadcasts
+                s.recv(size - 8)
+                head = s.recv(8)
+                size, kind = struct.unpack("<II", head)
+            body = b""
+            while len(body) < size - 8:
+                body += s.recv(size - 8 - len(body))
+            assert len(body) == 16 + 16 + 12 * 53
+            # 16-byte frame header, 16-byte 3D component header, then 12 bytes per marker; LFHD is marker 1
+            assert body[44:56] == b"\xff" * 12
+            assert body[32:44] != b"\xff" * 12
+        with socket.create_connection(("127.0.0.1", port)) as bad:
+            bad.settimeout(5)
+            bad.recv(64)
+            bad.sendall(b"\xde\xad\xbe\xef" * 4)  # not the protocol
+            assert bad.recv(64) == b""  # the server hangs up
+        with socket.create_connection(("127.0.0.1", port)) as again:  # and still serves others
+            again.settimeout(5)
+            assert b"QTM RT Interface connected" in again.recv(64)
+        assert proc.poll() is None
+
+
+def test_ingest_node_survives_qtm_restarts(tmp_path):
+    port = free_port()
+    out = tmp_path / "raw.csv"
+    graph = f"""
+nodes:
+  - id: qtm
+    kind: qtm_ingest
+    params: {{port: {port}, max_backoff_s: 0.5}}
+  - id: log
+    kind: frame_log
+    params: {{path: {out}}}
+    remaps: {{in: markers/raw}}
+"""
+
+    def count():
+        if not out.exists():
+            return 0
+        with open(out) as f:
+            return sum(1 for _ in csv.DictReader(f))
+
+    with launched(tmp_path, graph) as g:
+        with emulator(tmp_path, "--loop", port=port) as (sim, _):
+            wait_for(lambda: count() > 50, 30, "frames from QTM")
+            sim.kill()  # QTM vanishes without a goodbye
+            sim.wait()
+        n = count()
+        wait_for(lambda: "lost the connection to QTM" in g.log(), 10, "the ingest to notice")
+        with emulator(tmp_path, "--loop", port=port):
+            wait_for(lambda: count() > n + 50, 30, "frames after QTM came back")
+        assert g.proc.poll() is None and "restarted node" not in g.log()
+        assert "not reachable; retrying" in g.log()
