@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean
+.PHONY: demo test setup bench clean golden
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -26,3 +26,12 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis
+
+# The golden bag of the regression test (tests/nodes/test_bags.py): the first 240 frames of a real
+# take with real gaps, replayed in lockstep through launch/studio.yaml, skeleton/solved recorded.
+# Re-make it only when a change of results is intended, and say so in the commit.
+GOLDEN_TAKE := ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d
+golden: $(STAMP)
+	$(BIN)/mocap bag from-recording $(GOLDEN_TAKE) --frames 240 -o /tmp/mocap-golden-raw.mcap
+	$(BIN)/mocap bag play /tmp/mocap-golden-raw.mcap --launch launch/studio.yaml --lockstep --restamp \
+		--record tests/data/golden_solved.mcap

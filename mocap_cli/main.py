@@ -12,6 +12,7 @@ from mocap_core.ik.solvers import UnknownSolver
 from mocap_core.profiles import ProfileError
 from mocap_core.recordings import RecordingError
 from mocap_cli.graph_registry import NoGraph, find_graph, running_graphs
+from nodes.bags import BagError
 from mocap_cli.launch_file import LaunchError, load_launch_file
 from nodes.runtime import configure_logging
 
@@ -116,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.log_level)
     try:
         return args.func(args) or 0
-    except (LaunchError, NoGraph, RecordingError, ProfileError, ConstraintsError, UnknownSolver) as e:
+    except (LaunchError, NoGraph, RecordingError, ProfileError, ConstraintsError, UnknownSolver, BagError) as e:
         logging.getLogger("mocap").error("%s", e)
         return 2
     except KeyboardInterrupt:

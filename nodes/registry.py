@@ -12,6 +12,8 @@ KINDS: dict[str, str] = {
     "frame_log": "nodes.frame_log:FrameLog",
     "file_source": "nodes.file_source:FileSource",
     "qtm_ingest": "nodes.qtm_ingest:QtmIngest",
+    "bag_player": "nodes.bag_player:BagPlayer",
+    "recorder": "nodes.recorder:Recorder",
     "hip_interpolation": "nodes.hip_interpolation:HipInterpolation",
     "joint_localization": "nodes.joint_localization:JointLocalization",
     "ik_gapfill": "nodes.ik_gapfill:IkGapfill",

@@ -69,6 +69,10 @@ class Node:
     def on_message(self, topic: str, msg: Message) -> None:
         """Handle one decoded message of a logical topic."""
 
+    def on_raw(self, wire_topic: str, payload: bytes, msg: Message) -> None:
+        """Handle one message with its exact wire bytes (default: call on_message)."""
+        self.on_message(self.ctx._logical[wire_topic], msg)
+
     def tick(self) -> float | None:
         """Sources: produce output. Return seconds until the next call, or None when finished."""
         return None
@@ -335,7 +339,7 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
                     if got is None:
                         continue
                     try:
-                        node.on_message(*got)
+                        node.on_raw(frames[0].decode(), frames[1], got[1])
                     except Exception as e:
                         ctx.handler_error(got[0], e)
             if ctx.pub is not None and ctx.pub in events:

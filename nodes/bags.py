@@ -1,0 +1,194 @@
+"""Topic bags in MCAP: each message's exact wire bytes, its receive time and capture time.
+
+Channels use ``message_encoding: msgpack`` with the message's JSON Schema (``schema encoding:
+jsonschema``), so any MCAP tool can list and inspect them; ``mocap bag export --json`` rewrites a
+bag with JSON encoding for Foxglove and Lichtblick. Chunks are small (64 KiB), so a recorder killed
+with SIGKILL loses at most its last chunk: :func:`read_bag` reads such a file up to the damage.
+"""
+from __future__ import annotations
+
+import base64
+import json
+import logging
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader, make_reader
+from mcap.writer import CompressionType, Writer
+
+from messages import BY_SCHEMA, decode
+from messages.codec import json_schemas, peek_schema
+
+CHUNK_BYTES = 64 * 1024
+log = logging.getLogger("mocap.bags")
+LIBRARY = "mocap-graph"
+
+
+class BagError(Exception):
+    pass
+
+
+@dataclass
+class BagMessage:
+    topic: str
+    schema: str
+    data: bytes           # the exact wire payload
+    log_time_ns: int      # when the recorder received it
+    publish_time_ns: int  # capture time of the frame (header.capture_time_s), ns
+
+
+class BagWriter:
+    def __init__(self, path: str | Path, metadata: dict[str, str] | None = None):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.file = open(self.path, "wb")
+        self.writer = Writer(self.file, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD)
+        self.writer.start(profile="", library=LIBRARY)
+        self.schemas: dict[str, int] = {}
+        self.channels: dict[tuple[str, str], int] = {}
+        self.sequence: dict[int, int] = {}
+        self.count = 0
+        self.json_schemas = json_schemas()
+        if metadata:
+            self.writer.add_metadata("run", {k: str(v) for k, v in metadata.items()})
+
+    def _channel(self, topic: str, schema: str) -> int:
+        key = (topic, schema)
+        if key not in self.channels:
+            if schema not in self.schemas:
+                body = json.dumps(self.json_schemas.get(schema, {"type": "object"})).encode()
+                self.schemas[schema] = self.writer.register_schema(schema, "jsonschema", body)
+            self.channels[key] = self.writer.register_channel(topic, "msgpack", self.schemas[schema])
+        return self.channels[key]
+
+    def write(self, topic: str, payload: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        head = peek_schema(payload)
+        schema = head[0] if head else "unknown"
+        if publish_time_ns is None:
+            publish_time_ns = log_time_ns
+            if head is not None and schema in BY_SCHEMA:
+                try:
+                    publish_time_ns = int(decode(payload, topic).header.capture_time_s * 1e9)
+                except Exception:
+                    pass
+        cid = self._channel(topic, schema)
+        seq = self.sequence.get(cid, 0) + 1
+        self.sequence[cid] = seq
+        self.writer.add_message(cid, log_time=log_time_ns, data=payload, publish_time=publish_time_ns, sequence=seq)
+        self.count += 1
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        self.writer.add_metadata(name, {k: str(v) for k, v in data.items()})
+
+    def close(self) -> None:
+        self.writer.finish()
+        self.file.close()
+
+
+def _open(path: Path):
+    if not path.exists():
+        raise BagError(f"{path}: bag not found")
+    with open(path, "rb") as f:
+        magic = f.read(8)
+    if magic != b"\x89MCAP0\r\n":
+        raise BagError(f"{path}: not an MCAP file")
+    return open(path, "rb")
+
+
+def read_bag(path: str | Path, topics: list[str] | None = None) -> Iterator[BagMessage]:
+    """Messages in file order. A bag cut short (recorder killed) is read up to the damage."""
+    path = Path(path)
+    f = _open(path)
+    try:
+        reader = NonSeekingReader(f, validate_crcs=True)
+        count = 0
+        try:
+            for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=False):
+                count += 1
+                yield BagMessage(channel.topic, schema.name if schema else "unknown", message.data,
+                                 message.log_time, message.publish_time)
+        except (McapError, EOFError, ValueError, OSError, struct.error) as e:
+            # a recorder killed mid-write leaves a cut chunk and no footer: keep what came before
+            log.warning("%s: damaged after %d messages (%s: %s); the rest is unreadable", path, count,
+                        type(e).__name__, e)
+    finally:
+        f.close()
+
+
+def bag_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    path = Path(path)
+    f = _open(path)
+    try:
+        reader = make_reader(f)
+        return {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    except Exception:
+        return {}
+    finally:
+        f.close()
+
+
+def bag_info(path: str | Path) -> dict:
+    """Topics, counts, rates, duration and schemas (read by streaming, so damaged bags work too)."""
+    stats: dict[str, dict] = {}
+    first = last = None
+    for m in read_bag(path):
+        s = stats.setdefault(m.topic, {"schema": m.schema, "count": 0, "first_ns": m.log_time_ns, "last_ns": 0})
+        s["count"] += 1
+        s["last_ns"] = m.log_time_ns
+        first = m.log_time_ns if first is None else min(first, m.log_time_ns)
+        last = m.log_time_ns if last is None else max(last, m.log_time_ns)
+    for s in stats.values():
+        span = (s["last_ns"] - s["first_ns"]) / 1e9
+        s["rate_hz"] = (s["count"] - 1) / span if span > 0 else 0.0
+    duration = (last - first) / 1e9 if first is not None else 0.0
+    return {"path": str(path), "duration_s": duration, "messages": sum(s["count"] for s in stats.values()),
+            "topics": stats, "metadata": bag_metadata(path)}
+
+
+def to_json(value):
+    """A decoded message -> JSON-able data; arrays as {dtype, shape, data: base64} (their JSON Schema)."""
+    import numpy as np
+    from pydantic import BaseModel
+
+    if isinstance(value, np.ndarray):
+        return {"dtype": value.dtype.str, "shape": list(value.shape),
+                "data": base64.b64encode(np.ascontiguousarray(value).tobytes()).decode()}
+    if isinstance(value, BaseModel):
+        return {(f.alias or n): to_json(getattr(value, n)) for n, f in type(value).model_fields.items()}
+    if isinstance(value, dict):
+        return {k: to_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [to_json(v) for v in value]
+    if isinstance(value, float) and value != value:
+        return None
+    return value
+
+
+def export_json(src: str | Path, dst: str | Path) -> int:
+    """Rewrite a bag with JSON message encoding (Foxglove and Lichtblick read JSON, not msgpack)."""
+    out = open(dst, "wb")
+    w = Writer(out, chunk_size=1024 * 1024, compression=CompressionType.ZSTD)
+    w.start(profile="", library=LIBRARY)
+    schemas, channels, n = {}, {}, 0
+    all_schemas = json_schemas()
+    for name, meta in bag_metadata(src).items():
+        w.add_metadata(name, meta)
+    for m in read_bag(src):
+        try:
+            msg = decode(m.data, m.topic)
+        except Exception:
+            continue  # a foreign payload has no JSON form
+        if m.schema not in schemas:
+            schemas[m.schema] = w.register_schema(m.schema, "jsonschema",
+                                                  json.dumps(all_schemas.get(m.schema, {})).encode())
+        if m.topic not in channels:
+            channels[m.topic] = w.register_channel(m.topic, "json", schemas[m.schema])
+        w.add_message(channels[m.topic], log_time=m.log_time_ns, publish_time=m.publish_time_ns,
+                      data=json.dumps(to_json(msg)).encode())
+        n += 1
+    w.finish()
+    out.close()
+    return n

@@ -1,0 +1,57 @@
+"""Records topics of the graph into an MCAP bag (the in-graph twin of `mocap bag record`).
+
+As a node it is wired by the launcher like any subscriber, so sources wait for it: nothing is
+lost at start-up. SIGINT/SIGTERM finish the file (LINGER stays default on its socket so queued
+frames are drained first); after SIGKILL everything but the last chunk is readable.
+"""
+from __future__ import annotations
+
+import platform
+import time
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import Message
+from nodes.bags import BagWriter
+from nodes.runtime import Node
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    path: str = Field(description="output .mcap file")
+    topics: list[str] = Field(default_factory=lambda: ["markers/raw"], description="logical topics to record")
+    launch_file: str = ""
+
+
+class Recorder(Node):
+    kind = "recorder"
+    Params = Params
+
+    @classmethod
+    def inputs(cls, params):
+        return {t: Message for t in params.topics}
+
+    def setup(self) -> None:
+        import mcap
+        import messages
+
+        self.bag = BagWriter(self.params.path, {
+            "graph": self.ctx.spec.graph, "node": self.ctx.spec.id, "launch_file": self.params.launch_file,
+            "python": platform.python_version(), "mcap": getattr(mcap, "__version__", "?"),
+            "messages": ",".join(f"{m.SCHEMA}:{m.VERSION}" for m in messages.ALL_MESSAGES)})
+        self.marker_set = None
+
+    def on_message(self, topic, msg) -> None:
+        raise AssertionError("the recorder stores raw bytes; see on_raw")
+
+    def on_raw(self, wire_topic: str, payload: bytes, msg: Message) -> None:
+        self.bag.write(wire_topic, payload, time.time_ns(), int(msg.header.capture_time_s * 1e9))
+        if msg.SCHEMA == "mocap.MarkerSet":
+            self.marker_set = msg
+
+    def teardown(self) -> None:
+        if self.marker_set is not None:
+            self.bag.add_metadata("marker_set", {"labels": ",".join(self.marker_set.labels),
+                                                 "rate_hz": self.marker_set.rate_hz, "source": self.marker_set.source})
+        self.bag.close()
+        self.log.info("wrote %d messages to %s", self.bag.count, self.params.path)

@@ -1,0 +1,112 @@
+"""MCAP bags: byte-exact round trips, damaged files, clear errors, and the golden regression."""
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from messages import SkeletonFrame, decode
+from nodes.bags import BagError, bag_info, read_bag
+from tests.conftest import REPO, data_file, launched, wait_for
+
+TAKE = "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"
+GOLDEN = REPO / "tests" / "data" / "golden_solved.mcap"
+
+
+def mocap(*args, timeout=180):
+    return subprocess.run([sys.executable, "-m", "mocap_cli.main", *args], cwd=REPO, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def raw_bag(tmp_path_factory):
+    path = tmp_path_factory.mktemp("bags") / "raw.mcap"
+    r = mocap("bag", "from-recording", str(data_file(TAKE)), "--frames", "240", "-o", str(path))
+    assert r.returncode == 0, r.stderr
+    return path
+
+
+def test_info_lists_topics_counts_rates(raw_bag):
+    info = bag_info(raw_bag)
+    assert info["topics"]["markers/raw"]["count"] == 240
+    assert info["topics"]["markers/raw"]["schema"] == "mocap.MarkerFrame"
+    assert info["topics"]["markers/raw"]["rate_hz"] == pytest.approx(120, rel=1e-3)
+    out = mocap("bag", "info", str(raw_bag))
+    assert out.returncode == 0 and "markers/raw" in out.stdout and "120.0" in out.stdout
+
+
+def test_record_play_record_again_is_byte_identical(raw_bag, tmp_path):
+    again = tmp_path / "again.mcap"
+    r = mocap("bag", "play", str(raw_bag), "--rate", "4", "--record", str(again), "--record-topics", "markers/raw",
+              "markers/set")
+    assert r.returncode == 0, r.stderr
+    first = [m.data for m in read_bag(raw_bag, ["markers/raw"])]
+    second = [m.data for m in read_bag(again, ["markers/raw"])]
+    assert len(first) == 240 and first == second
+
+
+def test_replay_keeps_the_recorded_spacing(raw_bag, tmp_path):
+    again = tmp_path / "timed.mcap"
+    assert mocap("bag", "play", str(raw_bag), "--record", str(again), "--record-topics", "markers/raw").returncode == 0
+    t = np.array([m.log_time_ns for m in read_bag(again, ["markers/raw"])]) / 1e9
+    gaps_ms = np.diff(t) * 1000
+    assert len(t) == 240
+    assert abs(np.median(gaps_ms) - 1000 / 120) < 0.5  # the benchmark reports the p99 (issue: 1 ms at 300 Hz)
+
+
+def test_golden_regression_through_the_full_graph_in_lockstep(raw_bag, tmp_path):
+    if not GOLDEN.exists():
+        pytest.fail(f"{GOLDEN} is missing: make it with `make golden`")
+    out = tmp_path / "solved.mcap"
+    r = mocap("bag", "play", str(raw_bag), "--launch", "launch/studio.yaml", "--lockstep", "--restamp", "--record",
+              str(out))
+    assert r.returncode == 0, r.stderr
+    got = {m.header.frame: m for m in (decode(x.data, "skeleton/solved", SkeletonFrame) for x in read_bag(out))}
+    want = {m.header.frame: m for m in (decode(x.data, "skeleton/solved", SkeletonFrame) for x in read_bag(GOLDEN))}
+    assert sorted(got) == sorted(want) == list(range(240))
+    for f in want:
+        np.testing.assert_array_equal(got[f].status, want[f].status, err_msg=f"frame {f}")
+        # tolerance: float32 positions; IK is deterministic given the same frames in the same order
+        np.testing.assert_allclose(got[f].positions, want[f].positions, atol=1e-4, err_msg=f"frame {f}")
+
+
+def test_killed_recorder_leaves_a_readable_bag(tmp_path):
+    bag = tmp_path / "killed.mcap"
+    graph = f"""
+nodes:
+  - {{id: src, kind: synthetic_source, params: {{rate_hz: 500, frames: 0}}}}
+  - {{id: rec, kind: recorder, respawn: false, params: {{path: {bag}, topics: [markers/raw]}}}}
+"""
+    with launched(tmp_path, graph) as g:
+        wait_for(lambda: bag.exists() and bag.stat().st_size > 300_000, 30, "a few chunks on disk")
+        os.kill(g.node_pids()["rec"], signal.SIGKILL)
+        wait_for(lambda: "exited with code" in g.log() or "died" in g.log(), 10, "the launcher to notice")
+    frames = [decode(m.data, m.topic).header.frame for m in read_bag(bag)]
+    assert len(frames) > 100 and frames == list(range(len(frames)))
+
+
+def test_missing_corrupt_and_foreign_files_give_clear_errors(tmp_path):
+    with pytest.raises(BagError, match="bag not found"):
+        bag_info(tmp_path / "none.mcap")
+    (tmp_path / "foreign.mcap").write_text("not a bag at all")
+    with pytest.raises(BagError, match="not an MCAP file"):
+        bag_info(tmp_path / "foreign.mcap")
+    r = mocap("bag", "play", str(tmp_path / "foreign.mcap"))
+    assert r.returncode == 2 and "not an MCAP file" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_export_json_for_foxglove(raw_bag, tmp_path):
+    import json
+
+    from mcap.reader import make_reader
+
+    out = tmp_path / "json.mcap"
+    assert mocap("bag", "export", str(raw_bag), "--json", str(out)).returncode == 0
+    with open(out, "rb") as f:
+        msgs = list(make_reader(f).iter_messages(topics=["markers/raw"]))
+    schema, channel, message = msgs[0]
+    assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
+    body = json.loads(message.data)
+    assert body["header"]["schema"] == "mocap.MarkerFrame" and body["positions"]["shape"] == [53, 3]
