@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden
+.PHONY: demo test setup bench clean golden results
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -35,3 +35,10 @@ golden: $(STAMP)
 	$(BIN)/mocap bag from-recording $(GOLDEN_TAKE) --frames 240 -o /tmp/mocap-golden-raw.mcap
 	$(BIN)/mocap bag play /tmp/mocap-golden-raw.mcap --launch launch/studio.yaml --lockstep --restamp \
 		--record tests/data/golden_solved.mcap
+
+# The README's Results: thesis Tables 4.1-4.3 and Figures 4.5-4.6/4.10 reproduced on ../shared/data.
+results: $(STAMP)
+	$(BIN)/mocap eval timing --report docs/results/timing
+	$(BIN)/mocap eval gaps --remove elbow_l --from 1 --report docs/results/elbow_sprint
+	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
+		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --report docs/results/knee_ankle_dance

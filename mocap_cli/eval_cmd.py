@@ -9,7 +9,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from mocap_core.experiments import THESIS_TIMING_MS, localize_take, worst_case_timing
+from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, localize_take, reacquisition_jump,
+                                    worst_case_timing)
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
@@ -35,6 +36,23 @@ def add_parser(sub) -> None:
     t.add_argument("--report", default="reports/timing", help="directory for timing.md and timing.csv")
     t.add_argument("--json", action="store_true", help="also print the rows as JSON")
     t.set_defaults(func=run_timing)
+
+    g = esub.add_parser("gaps", help="accuracy of gap filling (thesis 4.2, Table 4.1, Figures 4.2-4.10)",
+                        description="Localize the complete take as the reference, hide joints from --from to --to "
+                                    "(by deleting their markers and, as the thesis did, by deleting the localized "
+                                    "joint), fill them with each solver and compare.")
+    g.add_argument("--take", default=DEFAULT_TAKE, help="recording (default: the BTK sprint start)")
+    g.add_argument("--profile", default="btk_sprint")
+    g.add_argument("--remove", default="elbow_l", help="joint(s) to hide, comma-separated (e.g. knee_l,ankle_l)")
+    g.add_argument("--from", dest="start_s", type=float, default=1.0, help="gap start, seconds (default 1)")
+    g.add_argument("--to", dest="stop_s", type=float, help="gap end, seconds (default: the end of the take)")
+    g.add_argument("--solvers", default="all", help="comma-separated, or all")
+    g.add_argument("--constraints", choices=["on", "off", "both"], default="both")
+    g.add_argument("--mode", choices=["markers", "joint", "both"], default="both",
+                   help="hide the markers that define the joint, or the localized joint (the thesis's way)")
+    g.add_argument("--report", default="reports/gaps", help="directory for gaps.md, gaps.csv and the plots")
+    g.add_argument("--no-plots", action="store_true")
+    g.set_defaults(func=run_gaps)
 
 
 def run_timing(args) -> int:
@@ -69,4 +87,70 @@ def run_timing(args) -> int:
     if args.json:
         print(json.dumps([r.as_dict() for r in rows], indent=2))
     log.info("wrote %s and %s", out / "timing.md", out / "timing.csv")
+    return 0
+
+
+def run_gaps(args) -> int:
+    rec = read_recording(args.take)
+    profile = load_profile(args.profile)
+    from mocap_core.pipeline import SkeletonPipeline
+
+    pipe = SkeletonPipeline(profile, rec.labels, fill_gaps=False)
+    landmarks = pipe.landmark_map.apply(rec.positions)
+    reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
+    joints = [j.strip() for j in args.remove.split(",") if j.strip()]
+    start = int(round(args.start_s * rec.rate_hz))
+    stop = rec.n_frames if args.stop_s is None else min(rec.n_frames, int(round(args.stop_s * rec.rate_hz)))
+    if not 0 < start < stop:
+        raise SystemExit(f"--from {args.start_s} / --to {args.stop_s}: the gap must start after frame 0 and end "
+                         f"after it starts (take: {rec.n_frames / rec.rate_hz:.2f} s)")
+    solvers = list(SOLVERS) if args.solvers == "all" else args.solvers.split(",")
+    modes = ["markers", "joint"] if args.mode == "both" else [args.mode]
+    cons = {"on": [True], "off": [False], "both": [False, True]}[args.constraints]
+    warm_up()
+    runs = []
+    combos = [(m, c, s) for m in modes for c in cons for s in solvers]
+    for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
+        runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode))
+    out = Path(args.report)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for r in runs:
+        for k, joint in enumerate(r.joints):
+            rows.append({"mode": r.mode, "solver": r.solver, "constraints": "on" if r.constraints else "off",
+                         "joint": joint, **r.stats(k)})
+    with open(out / "gaps.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    gap_s = (stop - start) / rec.rate_hz
+    md = [f"{', '.join(joints)} hidden from {start / rec.rate_hz:.2f} s for {gap_s:.2f} s "
+          f"({stop - start} frames) of {rec.source.split('/')[-1]}; distance to the localized reference, metres.", "",
+          "| removed by | solver | constraints | joint | min | max | mean | median | std | variance |",
+          "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        md.append(f"| {r['mode']} | {r['solver']} | {r['constraints']} | {r['joint']} | {r['min']:.3f} | "
+                  f"{r['max']:.3f} | {r['mean']:.3f} | {r['median']:.3f} | {r['std']:.3f} | {r['variance']:.4f} |")
+    if stop < rec.n_frames:
+        md += ["", "Re-acquisition: largest per-frame move around the frame the markers return, next to the "
+               "joint's normal per-frame motion (95th percentile of the reference).", "",
+               "| removed by | solver | constraints | joint | jump mm | normal mm | ratio |", "|---|---|---|---|---|---|---|"]
+        for r in runs:
+            for j in reacquisition_jump(r, reference, stop):
+                md.append(f"| {r.mode} | {r.solver} | {'on' if r.constraints else 'off'} | {j['joint']} | "
+                          f"{j['jump_m'] * 1000:.1f} | {j['normal_step_m'] * 1000:.1f} | {j['ratio']:.2f} |")
+    (out / "gaps.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
+    if not args.no_plots:
+        from mocap_cli.plots import error_plot, trajectory_plot
+
+        for mode in modes:
+            for constrained in cons:
+                sel = [r for r in runs if r.mode == mode and r.constraints == constrained]
+                tag = f"{mode}_{'constrained' if constrained else 'unconstrained'}"
+                error_plot(sel, rec.rate_hz, out / f"error_{tag}.png",
+                           f"{joints[0]} hidden ({mode}), constraints {'on' if constrained else 'off'}")
+                trajectory_plot(sel, reference, start, stop, out / f"trajectory_{tag}.png",
+                                f"{joints[0]} ({mode}), constraints {'on' if constrained else 'off'}")
+    log.info("wrote %s", out)
     return 0

@@ -82,3 +82,85 @@ def worst_case_timing(localized, solver: str, constraints: bool, params: SolverP
     t = np.array(times)
     return TimingRow(solver, constraints, len(t), t.min(), t.max(), t.mean(), float(np.median(t)), t.std(),
                      float(np.mean(iters)), float(np.mean(resid)))
+
+
+# -- accuracy with gaps (thesis 4.2) ------------------------------------------------------------------------
+# The landmarks whose loss takes a joint away ("remove by markers"). Knee and ankle share the
+# regression markers, as in the thesis's biking test where both were lost together.
+JOINT_LANDMARKS = {
+    "elbow": ("HLE", "HME"), "wrist": ("RSP", "USP"), "hand": ("HM2",), "shoulder": ("SAE",),
+    "knee": ("FLE", "FME", "TTC"), "ankle": ("FAL", "TAM"), "foot": ("FCC",), "toe": ("FM2",),
+}
+
+
+def landmarks_of(joint: str) -> list[str]:
+    base, _, side = joint.rpartition("_")
+    if base not in JOINT_LANDMARKS or side not in ("l", "r"):
+        raise ValueError(f"cannot remove {joint!r} by markers (joints: "
+                         f"{', '.join(f'{j}_l/_r' for j in JOINT_LANDMARKS)})")
+    return [f"{side.upper()}_{name}" for name in JOINT_LANDMARKS[base]]
+
+
+@dataclass
+class GapRun:
+    solver: str
+    constraints: bool
+    mode: str                 # "markers" or "joint"
+    joints: list[str]
+    frames: np.ndarray        # frame indices of the gap
+    estimate: np.ndarray      # (F, len(joints), 3) over the whole take
+    status: np.ndarray        # (F, len(joints))
+    error_m: np.ndarray       # (len(gap), len(joints)) distance to the reference inside the gap
+
+    def stats(self, j: int = 0) -> dict:
+        e = self.error_m[:, j]
+        e = e[np.isfinite(e)]
+        if not e.size:
+            return {k: float("nan") for k in ("min", "max", "mean", "median", "std", "variance", "missing")}
+        return {"min": e.min(), "max": e.max(), "mean": e.mean(), "median": float(np.median(e)), "std": e.std(),
+                "variance": e.var(), "missing": int((~np.isfinite(self.error_m[:, j])).sum())}
+
+
+def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, joints: list[str], start: int,
+            stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
+            fill_options: dict | None = None) -> GapRun:
+    """Hide ``joints`` in frames [start, stop) and fill them; compare with the complete take."""
+    from mocap_core.hip_interpolation import HipInterpolator
+    from mocap_core.localization import Localizer
+    from mocap_core.profiles import LANDMARK_INDEX
+
+    jidx = [INDEX[j] for j in joints]
+    lm = landmarks.copy()
+    if mode == "markers":
+        for j in joints:
+            for name in landmarks_of(j):
+                lm[start:stop, LANDMARK_INDEX[name]] = np.nan
+    lm, _ = HipInterpolator().fill_landmarks(lm)
+    loc = Localizer(profile.body).localize(lm)
+    pos, frames, status = loc.positions, loc.frames, loc.status
+    if mode == "joint":
+        pos[start:stop, jidx] = np.nan
+        frames[start:stop, jidx] = np.nan
+        status[start:stop, jidx] = Status.MISSING
+    p = params or SolverParams()
+    filler = GapFiller(solver, SolverParams(p.max_iterations, p.stop_distance_m, constraints, p.escape_step_deg,
+                                            p.escape_max_deg), **(fill_options or {}))
+    for f in range(len(pos)):
+        filler.fill(pos[f], frames[f], status[f])
+    err = np.linalg.norm(pos[start:stop][:, jidx] - reference[start:stop][:, jidx], axis=-1)
+    return GapRun(solver, constraints, mode, joints, np.arange(start, stop), pos[:, jidx], status[:, jidx], err)
+
+
+def reacquisition_jump(run: GapRun, reference: np.ndarray, stop: int, window: int = 3) -> list[dict]:
+    """Largest per-frame displacement of each joint around the frame its markers return, next to its
+    normal per-frame motion (the 95th percentile of the reference's per-frame displacement)."""
+    out = []
+    for k, joint in enumerate(run.joints):
+        step = np.linalg.norm(np.diff(run.estimate[:, k], axis=0), axis=-1)
+        lo, hi = max(0, stop - window), min(len(step), stop + window)
+        ref_step = np.linalg.norm(np.diff(reference[:, INDEX[joint]], axis=0), axis=-1)
+        normal = float(np.nanpercentile(ref_step, 95))
+        jump = float(np.nanmax(step[lo:hi])) if hi > lo else float("nan")
+        out.append({"joint": joint, "jump_m": jump, "normal_step_m": normal,
+                    "ratio": jump / normal if normal > 0 else float("nan")})
+    return out

@@ -169,7 +169,7 @@ class GapFiller:
 
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None):
-        constraints = constraints or load_constraints()
+        constraints = constraints if constraints is not None else load_constraints()
         self.limbs = {limb: LimbFiller(limb, solver, params, constraints) for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status) -> dict[str, FillStats]:

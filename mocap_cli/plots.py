@@ -1,0 +1,48 @@
+"""Plots for `mocap eval` (PNG, like the thesis's Figures 4.2-4.12)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from mocap_core.skeleton import INDEX  # noqa: E402
+
+COLOURS = {"ccd": "tab:blue", "fabrik": "tab:red", "jacobian_transpose": "tab:green", "dls": "tab:purple"}
+
+
+def error_plot(runs, rate_hz: float, path: Path, title: str) -> None:
+    fig, ax = plt.subplots(figsize=(8, 3.6), dpi=110)
+    for r in runs:
+        t = r.frames / rate_hz
+        ax.plot(t, r.error_m[:, 0], label=f"{r.solver}", color=COLOURS.get(r.solver), lw=1.2)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(f"distance to true {runs[0].joints[0]} (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def trajectory_plot(runs, reference: np.ndarray, start: int, stop: int, path: Path, title: str) -> None:
+    fig = plt.figure(figsize=(6, 5.5), dpi=110)
+    ax = fig.add_subplot(projection="3d")
+    j = INDEX[runs[0].joints[0]]
+    ref = reference[start:stop, j]
+    ax.plot(*ref.T, color="black", lw=2, label="true (localized)")
+    for r in runs:
+        est = r.estimate[start:stop, 0]
+        ax.plot(*est.T, color=COLOURS.get(r.solver), lw=1, label=r.solver)
+    ax.set_title(title)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
