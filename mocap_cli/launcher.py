@@ -223,17 +223,18 @@ class Launcher:
         return 0
 
     def stop(self) -> None:
-        alive = [p.popen for p in self.procs if p.popen is not None and p.popen.poll() is None]
-        for popen in alive:
-            popen.send_signal(signal.SIGTERM)
+        alive = [p for p in self.procs if p.popen is not None and p.popen.poll() is None]
+        for p in alive:
+            p.popen.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + STOP_GRACE_S
-        for popen in alive:
+        for p in alive:
             try:
-                popen.wait(timeout=max(0.0, deadline - time.monotonic()))
+                p.popen.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                log.warning("node pid %d ignored SIGTERM: killing it", popen.pid)
-                popen.kill()
-                popen.wait()
+                log.warning("node %s (pid %d) did not stop within %.1f s of SIGTERM: killing it", p.spec.id,
+                            p.popen.pid, STOP_GRACE_S)
+                p.popen.kill()
+                p.popen.wait()
         self.control.close(linger=0)
         self.zctx.term()
         self.registry.unlink(missing_ok=True)
