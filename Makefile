@@ -18,7 +18,13 @@ setup: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/mocap demo
 
-test: $(STAMP)
+# The viewer test drives a real headless Chromium (Debian's package; root or sudo installs it).
+CHROMIUM_STAMP := $(VENV)/.chromium
+$(CHROMIUM_STAMP):
+	command -v chromium >/dev/null 2>&1 || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; }
+	touch $(CHROMIUM_STAMP)
+
+test: $(STAMP) $(CHROMIUM_STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
@@ -34,7 +40,7 @@ GOLDEN_TAKE := ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_00
 golden: $(STAMP)
 	$(BIN)/mocap bag from-recording $(GOLDEN_TAKE) --frames 240 -o /tmp/mocap-golden-raw.mcap
 	$(BIN)/mocap bag play /tmp/mocap-golden-raw.mcap --launch launch/studio.yaml --lockstep --restamp \
-		--record tests/data/golden_solved.mcap
+		--record tests/data/golden_solved.mcap --set viewer.port=0
 
 # The README's Results: thesis Tables 4.1-4.3 and Figures 4.5-4.6/4.10 reproduced on ../shared/data.
 results: $(STAMP)

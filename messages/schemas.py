@@ -128,20 +128,24 @@ class LimbSolution(Message):
 
 
 class RigPose(Message):
-    """A pose of the target rig: root position and a local rotation per rig bone (``rig/pose``)."""
+    """A pose of the target rig (``rig/pose``), in the rig's own frame (Unity: left-handed, Y up):
+    the root position, and per rig bone its local rotation and local position (offset from its parent
+    this frame), both relative to the rig's T-pose rest. ``held`` marks bones whose joint was held."""
 
     SCHEMA: ClassVar[str] = "mocap.RigPose"
     rig: str
     bones: list[str]
     root_position: Array("float32", (3,))
     rotations: Array("float32", (None, 4))
+    positions: Array("float32", (None, 3))
     held: Array("uint8", (None,))
 
     @model_validator(mode="after")
     def _check_lengths(self):
         n = len(self.bones)
-        if self.rotations.shape[0] != n or self.held.shape[0] != n:
-            raise ValueError(f"{n} bones but rotations {self.rotations.shape} and held {self.held.shape}")
+        if not (self.rotations.shape[0] == self.positions.shape[0] == self.held.shape[0] == n):
+            raise ValueError(f"{n} bones but rotations {self.rotations.shape}, positions {self.positions.shape} "
+                             f"and held {self.held.shape}")
         return self
 
 

@@ -6,6 +6,7 @@ import time
 
 from tqdm import tqdm
 
+from mocap_core.bvh import BvhWriter
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.joints_csv import JointsCsvWriter
@@ -29,12 +30,15 @@ def add_parser(sub) -> None:
     s.add_argument("--constraints", help="joint-limit YAML (default: the thesis's values)")
     s.add_argument("--max-iterations", type=int, default=140)
     s.add_argument("--stop-distance", type=float, default=0.01, help="IK stop distance in metres")
-    s.add_argument("--joints-out", required=True, help="output joints CSV")
+    s.add_argument("--joints-out", help="output joints CSV")
+    s.add_argument("--bvh-out", help="output BVH (Y up, metres; see the README)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=run)
 
 
 def run(args) -> int:
+    if not args.joints_out and not args.bvh_out:
+        raise SystemExit("mocap solve: give --joints-out OUT.csv and/or --bvh-out OUT.bvh")
     rec = read_recording(args.file)
     profile = load_profile(args.profile)
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
@@ -44,17 +48,27 @@ def run(args) -> int:
     times = rec.times()
     counts = {s: 0 for s in Status}
     t0 = time.perf_counter()
-    with JointsCsvWriter(args.joints_out) as out, tqdm(total=rec.n_frames, unit="frame", disable=args.quiet,
-                                                        desc=f"solving {rec.source.split('/')[-1]}") as bar:
+    out = JointsCsvWriter(args.joints_out) if args.joints_out else None
+    bvh = BvhWriter(args.bvh_out, rec.rate_hz, profile.up_axis) if args.bvh_out else None
+    with tqdm(total=rec.n_frames, unit="frame", disable=args.quiet,
+              desc=f"solving {rec.source.split('/')[-1]}") as bar:
         for chunk in pipe.run(rec.positions):
             for k in range(len(chunk.positions)):
                 f = chunk.start + k
-                out.write(rec.first_frame + f, times[f], chunk.positions[k], chunk.status[k])
+                if out:
+                    out.write(rec.first_frame + f, times[f], chunk.positions[k], chunk.status[k])
+                if bvh:
+                    bvh.add(chunk.positions[k], chunk.frames[k])
             for s in Status:
                 counts[s] += int((chunk.status == s).sum())
             bar.update(len(chunk.positions))
+    if out:
+        out.close()
+    if bvh:
+        bvh.close()
     took = time.perf_counter() - t0
     total = sum(counts.values())
     log.info("%d frames in %.1f s (%.0f frames/s): %s -> %s", rec.n_frames, took, rec.n_frames / took,
-             ", ".join(f"{s.name.lower()} {100 * c / total:.1f}%" for s, c in counts.items()), args.joints_out)
+             ", ".join(f"{s.name.lower()} {100 * c / total:.1f}%" for s, c in counts.items()),
+             " and ".join(x for x in (args.joints_out, args.bvh_out) if x))
     return 0

@@ -16,6 +16,7 @@ from mocap_core.gapfill import LIMB_CHAINS
 from mocap_core.skeleton import INDEX, Status
 
 LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
+RESTART_JUMP = 10  # frames
 LIMB_INDEX = {limb: np.array([INDEX[j] for j in LIMB_CHAINS[limb]]) for limb in LIMBS}
 
 
@@ -44,7 +45,16 @@ class FrameJoiner:
         self.released_up_to = -1 << 62
         self.late = 0
 
+    def _restarted(self, frame: int) -> bool:
+        """Frame numbers that jump back (a looping take, a QTM restart) start a new stream."""
+        if frame < self.released_up_to - RESTART_JUMP:
+            self.pending.clear()
+            self.released_up_to = -1 << 62
+            return True
+        return False
+
     def add_torso(self, frame: int, now_s: float, positions, frames, status, source) -> list[Joined]:
+        self._restarted(frame)
         if frame <= self.released_up_to:
             self.late += 1
             return []
@@ -52,6 +62,7 @@ class FrameJoiner:
         return self.release(now_s)
 
     def add_limb(self, frame: int, now_s: float, limb: str, positions, frames, status) -> list[Joined]:
+        self._restarted(frame)
         if frame <= self.released_up_to:
             self.late += 1
             return []

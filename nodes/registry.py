@@ -18,6 +18,9 @@ KINDS: dict[str, str] = {
     "joint_localization": "nodes.joint_localization:JointLocalization",
     "ik_gapfill": "nodes.ik_gapfill:IkGapfill",
     "retarget": "nodes.retarget:Retarget",
+    "vmc_output": "nodes.vmc_output:VmcOutput",
+    "bvh_writer": "nodes.bvh_writer:BvhWriterNode",
+    "viewer": "nodes.viewer:Viewer",
 }
 
 

@@ -1,16 +1,20 @@
-"""Stage 5: join the torso and the four limbs of each frame -> ``skeleton/solved``.
-
-(Mapping onto a character rig, ``rig/pose``, is added by the outputs issue.)
+"""Stage 5: join the torso and the four limbs of each frame -> ``skeleton/solved``, and map the
+pose onto the character rig -> ``rig/pose`` (rotations relative to the rig's T-pose; mocap_core/rig.py).
 """
 from __future__ import annotations
 
 import time
+from typing import Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from messages import LimbSolution, SkeletonFrame
-from mocap_core.ik.kernels import quats_to_frames
+from messages import LimbSolution, RigPose, SkeletonFrame
+from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
 from mocap_core.limb_join import LIMBS, FrameJoiner
+from mocap_core.rig import BONE_JOINT, BONES, local_positions, rig_local_rotations, rig_world_rotations, \
+    to_unity_position
+from mocap_core.skeleton import Status
 from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
@@ -19,18 +23,21 @@ from nodes.skeleton_codec import from_message, to_message
 class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     max_wait_ms: float = Field(20.0, gt=0, description="longest wait for a late limb before it is held")
+    up_axis: Literal["x", "y", "z"] = Field("z", description="the source's vertical axis (the profile's up_axis)")
+    rig: Literal["unity_humanoid"] = "unity_humanoid"
 
 
 class Retarget(Node):
     kind = "retarget"
     Params = Params
     subscribes = {"skeleton/torso": SkeletonFrame, **{f"skeleton/limb/{limb}": LimbSolution for limb in LIMBS}}
-    publishes = {"skeleton/solved": SkeletonFrame}
+    publishes = {"skeleton/solved": SkeletonFrame, "rig/pose": RigPose}
     timer_period_s = 0.005
 
     def setup(self) -> None:
         warm_up()
         self.joiner = FrameJoiner(self.params.max_wait_ms / 1000)
+        self.last_world = np.tile(np.eye(3), (len(BONES), 1, 1))
 
     def on_message(self, topic, msg) -> None:
         now = time.monotonic()
@@ -49,3 +56,19 @@ class Retarget(Node):
             self.ctx.publish("skeleton/solved", to_message(j.positions, j.frames, j.status), source=j.source)
             if j.held_limbs:
                 self.ctx.errors["held_limb"] += len(j.held_limbs)
+            self._publish_rig(j)
+
+    def _publish_rig(self, j) -> None:
+        up = self.params.up_axis
+        world = rig_world_rotations(j.frames, up)
+        unknown = ~np.isfinite(world).all(axis=(1, 2))
+        world[unknown] = self.last_world[unknown]  # a bone without a frame keeps its last rotation
+        self.last_world = world
+        local = rig_local_rotations(world)
+        offsets = np.nan_to_num(local_positions(j.positions, world, up))
+        held = (j.status[BONE_JOINT] != Status.LOCATED) | unknown
+        self.ctx.publish("rig/pose", RigPose(
+            header=RigPose.make_header(), rig=self.params.rig, bones=list(BONES),
+            root_position=np.nan_to_num(to_unity_position(j.positions[0], up)).astype(np.float32),
+            rotations=frames_to_quats(np.ascontiguousarray(local)).astype(np.float32),
+            positions=offsets.astype(np.float32), held=held.astype(np.uint8)), source=j.source)

@@ -32,7 +32,7 @@ def samples():
                      positions=pos[:2], orientations=ori[:2], status=np.uint8([1, 2]), solver="ccd",
                      iterations=4, residual_m=0.001, solve_time_us=12.5),
         RigPose(header=RigPose.make_header(3), rig="unity", bones=["Hips"], root_position=np.float32([0, 1, 0]),
-                rotations=ori[:1], held=np.zeros(1, np.uint8)),
+                rotations=ori[:1], positions=pos[:1], held=np.zeros(1, np.uint8)),
         Heartbeat(header=Heartbeat.make_header(), node="n", kind="k", pid=1, state="running", uptime_s=2.0,
                   rates_hz={"a": 100.0}, drops={"a": 2}, errors={"decode_garbage": 1}),
     ]

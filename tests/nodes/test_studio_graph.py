@@ -22,6 +22,8 @@ def studio(tmp_path, frames, solver="ccd"):
             node["params"]["solver"] = solver
         if node["id"] == "log":
             node["params"]["path"] = str(tmp_path / "solved.csv")
+        if node["id"] == "viewer":
+            node["params"]["port"] = 0
     return yaml.safe_dump(lf)
 
 

@@ -1,0 +1,35 @@
+"""Records ``skeleton/solved`` into a BVH file while the graph streams; the file is written on stop."""
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import SkeletonFrame
+from mocap_core.bvh import BvhWriter
+from nodes.runtime import Node
+from nodes.skeleton_codec import from_message
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    path: str
+    rate_hz: float = Field(120.0, gt=0, description="the capture rate (BVH frame time)")
+    up_axis: Literal["x", "y", "z"] = "z"
+
+
+class BvhWriterNode(Node):
+    kind = "bvh_writer"
+    Params = Params
+    subscribes = {"skeleton/solved": SkeletonFrame}
+
+    def setup(self) -> None:
+        self.bvh = BvhWriter(self.params.path, self.params.rate_hz, self.params.up_axis)
+
+    def on_message(self, topic, msg) -> None:
+        pos, frames, _ = from_message(msg)
+        self.bvh.add(pos, frames)
+
+    def teardown(self) -> None:
+        self.bvh.close()
+        self.log.info("wrote %d frames to %s", len(self.bvh.rows), self.params.path)

@@ -1,0 +1,118 @@
+"""A live web viewer (default http://127.0.0.1:8090): markers, located joints, IK-estimated joints
+in red (as in thesis Figure 4.4), held joints in orange, bones, and a panel of every node's rate,
+latency and drops from the heartbeats. One self-contained page (canvas, no library, nothing from a
+CDN) that polls ``/state``; ``/events`` streams the same as Server-Sent Events at up to ``max_fps``.
+Drag to orbit, wheel to zoom.
+"""
+from __future__ import annotations
+
+import json
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import Heartbeat, MarkerFrame, SkeletonFrame
+from mocap_core.skeleton import JOINTS, PARENT_INDEX
+from nodes.runtime import Node
+
+PAGE = Path(__file__).with_name("viewer.html")
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    host: str = "127.0.0.1"
+    port: int = Field(8090, ge=0, le=65535)
+    max_fps: float = Field(30.0, gt=0)
+    up_axis: Literal["x", "y", "z"] = "z"
+
+
+class Viewer(Node):
+    kind = "viewer"
+    Params = Params
+    subscribes = {"skeleton/solved": SkeletonFrame, "markers/raw": MarkerFrame, "diagnostics": Heartbeat}
+
+    def setup(self) -> None:
+        self.state = {"skeleton": None, "markers": None, "nodes": {}, "frame": -1}
+        self.version = 0
+        self.cond = threading.Condition()
+        viewer = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                pass
+
+            def do_GET(self):
+                if self.path in ("/", "/index.html"):
+                    body = PAGE.read_bytes()
+                    self.send_response(200)
+                    self.send_header("Content-Type", "text/html; charset=utf-8")
+                    self.send_header("Content-Length", str(len(body)))
+                    self.end_headers()
+                    self.wfile.write(body)
+                elif self.path == "/events":
+                    self.send_response(200)
+                    self.send_header("Content-Type", "text/event-stream")
+                    self.send_header("Cache-Control", "no-cache")
+                    self.end_headers()
+                    viewer.stream(self.wfile)
+                elif self.path == "/state":
+                    body = viewer.snapshot().encode()
+                    self.send_response(200)
+                    self.send_header("Content-Type", "application/json")
+                    self.end_headers()
+                    self.wfile.write(body)
+                else:
+                    self.send_error(404)
+
+        self.server = ThreadingHTTPServer((self.params.host, self.params.port), Handler)
+        self.server.daemon_threads = True
+        self.url = f"http://{self.params.host}:{self.server.server_address[1]}/"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+        self.log.info("viewer at %s", self.url)
+
+    def snapshot(self) -> str:
+        with self.cond:
+            return json.dumps({**self.state, "joints": JOINTS, "parents": PARENT_INDEX.tolist(),
+                               "up": self.params.up_axis})
+
+    def stream(self, out) -> None:
+        seen = -1
+        period = 1.0 / self.params.max_fps
+        try:
+            while True:
+                with self.cond:
+                    self.cond.wait_for(lambda: self.version != seen, timeout=1.0)
+                    seen = self.version
+                out.write(f"data: {self.snapshot()}\n\n".encode())
+                out.flush()
+                time.sleep(period)
+        except (BrokenPipeError, ConnectionResetError, OSError):
+            return
+
+    def on_message(self, topic, msg) -> None:
+        with self.cond:
+            if isinstance(msg, SkeletonFrame):
+                pos = np.where(np.isfinite(msg.positions), msg.positions, np.nan)
+                self.state["skeleton"] = {"positions": [None if np.isnan(p).any() else [round(float(v), 4) for v in p]
+                                                        for p in pos], "status": msg.status.tolist()}
+                self.state["frame"] = msg.header.frame
+            elif isinstance(msg, MarkerFrame):
+                self.state["markers"] = [[round(float(v), 4) for v in p] for p in msg.positions
+                                         if np.isfinite(p).all()]
+            elif isinstance(msg, Heartbeat):
+                self.state["nodes"][msg.node] = {
+                    "kind": msg.kind, "state": msg.state,
+                    "in_hz": sum(v for t, v in msg.rates_hz.items() if t in msg.received),
+                    "out_hz": sum(v for t, v in msg.rates_hz.items() if t in msg.published),
+                    "p50_ms": msg.latency.p50_ms, "p99_ms": msg.latency.p99_ms,
+                    "drops": sum(msg.drops.values()), "errors": sum(msg.errors.values())}
+            self.version += 1
+            self.cond.notify_all()
+
+    def teardown(self) -> None:
+        self.server.shutdown()

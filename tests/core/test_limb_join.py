@@ -1,0 +1,66 @@
+"""Joining limbs per frame: complete frames go at once, a late limb is held, never waited for."""
+import numpy as np
+
+from mocap_core.limb_join import LIMB_INDEX, LIMBS, FrameJoiner
+from mocap_core.skeleton import N_JOINTS, Status
+
+
+def torso(value=0.0):
+    return (np.full((N_JOINTS, 3), value), np.tile(np.eye(3), (N_JOINTS, 1, 1)),
+            np.full(N_JOINTS, Status.LOCATED, np.uint8), object())
+
+
+def limb(limb_name, value):
+    n = len(LIMB_INDEX[limb_name])
+    return np.full((n, 3), value), np.tile(np.eye(3), (n, 1, 1)), np.full(n, Status.ESTIMATED, np.uint8)
+
+
+def test_complete_frame_is_released_when_the_last_limb_arrives():
+    j = FrameJoiner(max_wait_s=1.0)
+    assert j.add_torso(1, 0.0, *torso()) == []
+    for name in LIMBS[:-1]:
+        assert j.add_limb(1, 0.0, name, *limb(name, 1.0)) == []
+    out = j.add_limb(1, 0.0, LIMBS[-1], *limb(LIMBS[-1], 1.0))
+    assert len(out) == 1 and out[0].frame == 1 and out[0].held_limbs == []
+    assert (out[0].status[LIMB_INDEX["left_arm"]] == Status.ESTIMATED).all()
+
+
+def test_late_limb_is_held_and_then_dropped():
+    j = FrameJoiner(max_wait_s=0.02)
+    j.add_torso(1, 0.0, *torso())
+    for name in LIMBS:
+        j.add_limb(1, 0.0, name, *limb(name, 1.0))
+    j.add_torso(2, 0.01, *torso(0.5))
+    for name in LIMBS[1:]:
+        j.add_limb(2, 0.01, name, *limb(name, 2.0))
+    out = j.release(0.05)  # left_arm of frame 2 never came in time
+    assert [o.frame for o in out] == [2] and out[0].held_limbs == ["left_arm"]
+    idx = LIMB_INDEX["left_arm"]
+    assert (out[0].status[idx] == Status.HELD).all()
+    np.testing.assert_allclose(out[0].positions[idx], 0.5)  # last pose moved with its root
+    assert j.add_limb(2, 0.06, "left_arm", *limb("left_arm", 2.0)) == [] and j.late == 1
+
+
+def test_a_newer_complete_frame_releases_older_ones_in_order():
+    j = FrameJoiner(max_wait_s=10)
+    j.add_torso(1, 0.0, *torso())
+    j.add_torso(2, 0.0, *torso())
+    for name in LIMBS:
+        j.add_limb(1, 0.0, name, *limb(name, 1.0))
+    out = []
+    for name in LIMBS:
+        out += j.add_limb(2, 0.0, name, *limb(name, 1.0))
+    assert [o.frame for o in out] == [2]
+
+
+def test_frame_numbers_jumping_back_start_a_new_stream():
+    j = FrameJoiner(max_wait_s=1.0)
+    for f in (500, 501):
+        j.add_torso(f, 0.0, *torso())
+        for name in LIMBS:
+            j.add_limb(f, 0.0, name, *limb(name, 1.0))
+    j.add_torso(3, 0.0, *torso())
+    out = []
+    for name in LIMBS:
+        out += j.add_limb(3, 0.0, name, *limb(name, 1.0))
+    assert [o.frame for o in out] == [3]
