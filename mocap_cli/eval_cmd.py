@@ -54,6 +54,18 @@ def add_parser(sub) -> None:
     g.add_argument("--no-plots", action="store_true")
     g.set_defaults(func=run_gaps)
 
+    lt = esub.add_parser("latency", help="end-to-end latency of the full graph fed by the QTM emulator",
+                         description="Starts the QTM emulator and the full graph (qtm_ingest to retarget), logs "
+                                     "skeleton/solved, and reports latency from the frame entering qtm_ingest to it "
+                                     "leaving retarget, and dropped frames, next to a bare pyzmq relay chain with the "
+                                     "same number of hops measured in the same run.")
+    lt.add_argument("--rate", type=float, default=300, help="capture rate to replay at (Hz)")
+    lt.add_argument("--seconds", type=float, default=30)
+    lt.add_argument("--take", default=str(REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"))
+    lt.add_argument("--profile", default="cmu41")
+    lt.add_argument("--report", default="reports/latency")
+    lt.set_defaults(func=run_latency)
+
 
 def run_timing(args) -> int:
     rec = read_recording(args.take)
@@ -153,4 +165,63 @@ def run_gaps(args) -> int:
                 trajectory_plot(sel, reference, start, stop, out / f"trajectory_{tag}.png",
                                 f"{joints[0]} ({mode}), constraints {'on' if constrained else 'off'}")
     log.info("wrote %s", out)
+    return 0
+
+
+def run_latency(args) -> int:
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import tempfile
+
+    import numpy as np
+
+    from mocap_cli.bare_chain import bare_chain
+    from mocap_cli.launch_file import load_launch_file
+    from mocap_cli.launcher import Launcher
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    tmp = Path(tempfile.mkdtemp(prefix="mocap-latency-"))
+    ready, solved = tmp / "port", tmp / "solved.csv"
+    sim = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "--log-level", "WARNING", "qtm-sim", args.take,
+                            "--port", str(port), "--rate", str(args.rate), "--loop", "--ready-file", str(ready)])
+    try:
+        while not ready.exists():
+            time.sleep(0.05)
+        lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [
+            f"qtm.port={port}", f"hips.profile={args.profile}", f"localize.profile={args.profile}",
+            "retarget.up_axis=z"])
+        lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]
+        from mocap_cli.launch_file import NodeEntry
+
+        lf.nodes.append(NodeEntry(id="log", kind="frame_log", params={"path": str(solved)},
+                                  remaps={"in": "skeleton/solved"}))
+        lf.name = f"latency-{int(time.time())}"
+        Launcher(lf).run(duration_s=args.seconds)
+    finally:
+        sim.send_signal(signal.SIGINT)
+        sim.wait()
+    with open(solved) as f:
+        rows = list(csv.DictReader(f))
+    lat = np.array([float(r["latency_us"]) for r in rows]) / 1000
+    lat = lat[len(lat) // 10:]  # leave out the first 10% (start-up)
+    seq = np.array([int(r["seq"]) for r in rows])
+    drops = int((np.diff(seq) - 1).clip(min=0).sum())
+    hops = 6  # ingest -> hips -> localize -> torso -> limb -> retarget -> log
+    bare = bare_chain(hops, min(3000, int(args.rate * 10)), args.rate) / 1000
+    md = [f"Full graph fed by the QTM emulator at {args.rate:.0f} Hz for {args.seconds:.0f} s "
+          f"({len(rows)} frames out of skeleton/solved); latency from entering qtm_ingest to leaving retarget, ms.", "",
+          "| chain | hops | p50 | p99 | max | dropped |", "|---|---|---|---|---|---|",
+          f"| mocap graph | {hops} | {np.percentile(lat, 50):.2f} | {np.percentile(lat, 99):.2f} | {lat.max():.2f} | "
+          f"{drops} |",
+          f"| bare pyzmq relays | {hops} | {np.percentile(bare, 50):.2f} | {np.percentile(bare, 99):.2f} | "
+          f"{bare.max():.2f} | - |", "",
+          f"ratio (p50): {np.percentile(lat, 50) / np.percentile(bare, 50):.2f}"]
+    out = Path(args.report)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"latency_{args.rate:.0f}hz.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
     return 0

@@ -117,11 +117,13 @@ def rig_world_rotations(frames_src: np.ndarray, up_axis: str) -> np.ndarray:
     return FLIP_Z @ q @ FLIP_Z
 
 
+_HAS_PARENT = BONE_PARENT >= 0
+_PARENT_OF = np.where(_HAS_PARENT, BONE_PARENT, 0)
+
+
 def rig_local_rotations(world: np.ndarray) -> np.ndarray:
-    local = world.copy()
-    for b, p in enumerate(BONE_PARENT):
-        if p >= 0:
-            local[b] = world[p].T @ world[b]
+    local = np.einsum("bji,bjk->bik", world[_PARENT_OF], world)  # parent^T @ bone, all bones at once
+    local[~_HAS_PARENT] = world[~_HAS_PARENT]
     return local
 
 
@@ -148,10 +150,8 @@ def rest_offsets(positions: np.ndarray, frames: np.ndarray, up_axis: str) -> np.
 def local_positions(positions_src: np.ndarray, world: np.ndarray, up_axis: str) -> np.ndarray:
     """Each rig bone's offset from its parent this frame, in the parent's rig frame (B, 3)."""
     p = to_unity_position(positions_src[BONE_JOINT], up_axis)
-    out = np.zeros_like(p)
-    for b, par in enumerate(BONE_PARENT):
-        if par >= 0:
-            out[b] = world[par].T @ (p[b] - p[par])
+    out = np.einsum("bji,bj->bi", world[_PARENT_OF], p - p[_PARENT_OF])
+    out[~_HAS_PARENT] = 0.0
     return out
 
 

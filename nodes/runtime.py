@@ -160,6 +160,11 @@ class NodeContext:
             elif note[:1] == b"\x00":
                 self._subscriptions[note[1:]] -= 1
 
+    def has_subscribers(self, topic: str) -> bool:
+        """Whether anyone subscribes to a logical topic now (skip work nobody will receive)."""
+        self.read_subscriptions()
+        return self._subscriptions[self.wire_topic(topic).encode()] > 0
+
     def subscribers_connected(self) -> bool:
         return all(self._subscriptions[t.encode()] >= n for t, n in self.spec.expected_subscribers.items())
 

@@ -19,6 +19,7 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     host: str = "127.0.0.1"
     port: int = Field(39539, ge=1, le=65535)
+    max_rate_hz: float = Field(0.0, ge=0, description="send at most this often (keep the newest); 0 = every frame")
 
 
 def _msg(address: str, *args) -> object:
@@ -36,8 +37,14 @@ class VmcOutput(Node):
     def setup(self) -> None:
         self.client = SimpleUDPClient(self.params.host, self.params.port)
         self.t0 = time.monotonic()
+        self.next_send = 0.0
 
     def on_message(self, topic, msg: RigPose) -> None:
+        if self.params.max_rate_hz:
+            now = time.monotonic()
+            if now < self.next_send:
+                return  # engines render at display rate: a newer frame follows soon
+            self.next_send = now + 1.0 / self.params.max_rate_hz
         bundle = OscBundleBuilder(IMMEDIATELY)
         bundle.add_content(_msg("/VMC/Ext/OK", 1))
         bundle.add_content(_msg("/VMC/Ext/T", float(time.monotonic() - self.t0)))
