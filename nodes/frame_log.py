@@ -23,12 +23,18 @@ class FrameLog(Node):
     def setup(self):
         Path(self.params.path).parent.mkdir(parents=True, exist_ok=True)
         self.file = open(self.params.path, "w", buffering=1)
-        self.file.write("frame,seq,publisher,schema,latency_us\n")
+        self.file.write("frame,seq,publisher,schema,latency_us,estimated,held,missing\n")
 
     def on_message(self, topic, msg):
         latency_us = (time.time_ns() - msg.header.entry_time_ns) / 1e3 if msg.header.entry_time_ns else ""
         h = msg.header
-        self.file.write(f"{h.frame},{h.seq},{h.publisher},{h.schema_name},{latency_us}\n")
+        counts = ""
+        status = getattr(msg, "status", None)
+        if status is not None:  # skeletons: how many joints IK estimated, held, or could not give
+            counts = f"{int((status == 2).sum())},{int((status == 3).sum())},{int((status == 0).sum())}"
+        else:
+            counts = ",,"
+        self.file.write(f"{h.frame},{h.seq},{h.publisher},{h.schema_name},{latency_us},{counts}\n")
 
     def teardown(self):
         self.file.close()
