@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden results
+.PHONY: demo test setup bench clean golden results results-blend
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -48,3 +48,8 @@ results: $(STAMP)
 	$(BIN)/mocap eval gaps --remove elbow_l --from 1 --report docs/results/elbow_sprint
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --report docs/results/knee_ankle_dance
+
+results-blend: $(STAMP)
+	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
+		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --solvers ccd --constraints on --mode markers \
+		--reacquire-step 0.01 --report docs/results/knee_ankle_dance_blend

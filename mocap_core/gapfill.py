@@ -57,7 +57,7 @@ class LimbFiller:
     """Fills the gaps of one limb frame after frame. Owns the limb's previous solved chain."""
 
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None):
+                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -71,6 +71,13 @@ class LimbFiller:
         self.prev_frames = np.full((n, 3, 3), np.nan)
         self.prev_parent_frame = np.full((3, 3), np.nan)
         self.has_prev = np.zeros(1, bool)
+        # Re-acquisition without a twitch (beyond the thesis): when a joint's markers come back, the
+        # gap between where IK had it and where the markers are is closed by at most this much per
+        # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
+        self.reacquire_step_m = reacquire_step_m
+        self.blend_offset = np.zeros((n, 3))
+        self.last_out: np.ndarray | None = None
+        self.last_status: np.ndarray | None = None
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                            c.twists[self.joints], c.has_twist[self.joints])
@@ -84,8 +91,27 @@ class LimbFiller:
                    self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
                    self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
                    p.escape_max_deg, out)
+        if self.reacquire_step_m > 0:
+            self._blend_reacquired(positions, status)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
+
+    def _blend_reacquired(self, positions: np.ndarray, status: np.ndarray) -> None:
+        idx = self.joints
+        now = status[idx]
+        if self.last_out is not None:
+            back = (now == Status.LOCATED) & np.isin(self.last_status, (Status.ESTIMATED, Status.HELD))
+            back &= np.isfinite(self.last_out).all(axis=1)
+            self.blend_offset[back] = self.last_out[back] - positions[idx[back]]
+            self.blend_offset[now != Status.LOCATED] = 0.0
+            size = np.linalg.norm(self.blend_offset, axis=1)
+            active = size > 0
+            if active.any():
+                shrink = np.clip((size - self.reacquire_step_m) / np.where(active, size, 1.0), 0.0, 1.0)
+                self.blend_offset *= shrink[:, None]
+                positions[idx] += self.blend_offset
+        self.last_out = positions[idx].copy()
+        self.last_status = now.copy()
 
 
 @njit(cache=True)
@@ -168,9 +194,9 @@ class GapFiller:
     """All five limbs in graph order (torso first), for offline use; the nodes use LimbFiller."""
 
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None):
+                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0):
         constraints = constraints if constraints is not None else load_constraints()
-        self.limbs = {limb: LimbFiller(limb, solver, params, constraints) for limb in LIMB_ORDER}
+        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m) for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status) -> dict[str, FillStats]:
         return {limb: f.fill(positions, frames, status) for limb, f in self.limbs.items()}

@@ -73,3 +73,24 @@ def test_nothing_is_invented_before_the_limb_was_seen_whole(walk):
         filler.fill(pos[f], frames[f], status[f])
     assert (status[:50, INDEX["knee_l"]] == Status.MISSING).all()
     assert (status[50:, INDEX["knee_l"]] == Status.LOCATED).all()
+
+
+def test_reacquisition_blend_bounds_the_per_frame_move(walk):
+    """Beyond the thesis: markers that come back are blended in at most reacquire_step_m per frame."""
+    lm, prof = walk
+    hidden = lm.copy()
+    hidden[100:200, [LANDMARK_INDEX["L_FLE"], LANDMARK_INDEX["L_FME"], LANDMARK_INDEX["L_TTC"]]] = np.nan
+    moves = {}
+    for step in (0.0, 0.005):
+        pos, frames, status = localized(hidden, prof)
+        filler = LimbFiller("left_leg", "ccd", reacquire_step_m=step)
+        for f in range(len(pos)):
+            filler.fill(pos[f], frames[f], status[f])
+        k = INDEX["knee_l"]
+        moves[step] = np.linalg.norm(np.diff(pos[195:215, k], axis=0), axis=1).max()
+        truth, _, _ = localized(lm, prof)
+        # the blend ends: later frames are the measurement again
+        np.testing.assert_allclose(pos[300:, k], truth[300:, k], atol=1e-9)
+    normal = np.percentile(np.linalg.norm(np.diff(localized(lm, prof)[0][:, INDEX["knee_l"]], axis=0), axis=1), 95)
+    assert moves[0.005] <= normal + 0.005 + 1e-9
+    assert moves[0.0] > moves[0.005]
