@@ -28,8 +28,16 @@ class LaunchError(Exception):
 class Transport(BaseModel):
     model_config = ConfigDict(extra="forbid")
     kind: Literal["ipc", "tcp"] = "ipc"
-    host: str = "127.0.0.1"
+    host: str = Field("127.0.0.1", description="address nodes bind and connect to; loopback unless you say")
     base_port: int = Field(7100, ge=1024, le=65000)
+    curve_keys: str | None = Field(None, description="directory of CURVE keys (tcp only): authenticated, "
+                                   "encrypted links; make one with `mocap keys generate DIR`")
+
+    @model_validator(mode="after")
+    def _curve_needs_tcp(self):
+        if self.curve_keys and self.kind != "tcp":
+            raise ValueError("curve_keys secure tcp links; set transport.kind: tcp")
+        return self
 
 
 class NodeEntry(BaseModel):
@@ -40,6 +48,7 @@ class NodeEntry(BaseModel):
     remaps: dict[str, str] = {}
     replicas: int = Field(1, ge=1, le=64)
     respawn: bool = True
+    hwm: int = Field(1000, ge=1, description="messages queued per peer before the newest are dropped")
     endpoint: str | None = Field(None, description="explicit endpoint to bind (multi-host graphs)")
 
 

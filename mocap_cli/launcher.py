@@ -23,6 +23,8 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 
+from pathlib import Path
+
 import zmq
 
 from mocap_cli.graph_registry import registry_path, write_registry
@@ -78,7 +80,9 @@ def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
                 endpoint = f"ipc://{sock_dir}/{pid.replace('#', '-')}.pub"
             spec = NodeSpec(id=pid, kind=entry.kind, graph=lf.name, params=entry.params, remaps=entry.remaps,
                             namespace=lf.namespace, pub_endpoint=endpoint, control_endpoint=control_endpoint,
-                            replica=k, replicas=entry.replicas)
+                            replica=k, replicas=entry.replicas, hwm=entry.hwm,
+                            curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
+                            else None)
             procs.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn,
                               publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
                               subscribes=[spec.wire_topic(t) for t in inputs]))
@@ -125,6 +129,7 @@ class Launcher:
         write_registry(self.lf.name, {
             "name": self.lf.name, "launch_file": os.path.abspath(self.launch_path) if self.launch_path else "",
             "launcher_pid": os.getpid(), "control": self.control_endpoint,
+            "curve_keys": str(Path(self.lf.transport.curve_keys).resolve()) if self.lf.transport.curve_keys else None,
             "nodes": [{"id": p.spec.id, "kind": p.spec.kind, "pid": p.popen.pid if p.popen else None,
                        "endpoint": p.spec.pub_endpoint, "publishes": p.publishes, "subscribes": p.subscribes,
                        "restarts": p.restarts} for p in self.procs],

@@ -51,6 +51,15 @@ def cmd_node(args) -> int:
     return 0
 
 
+def cmd_keys(args) -> int:
+    from nodes.curve import generate
+
+    d = generate(args.directory)
+    print(f"wrote CURVE keys to {d}: server.key(_secret), client.key(_secret), authorized/client.key; "
+          f"use them with `transport: {{kind: tcp, curve_keys: {d}}}`")
+    return 0
+
+
 def cmd_schema(args) -> int:
     from messages import json_schemas
 
@@ -102,6 +111,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--graph", help="graph name, when several are running")
     s.add_argument("--seconds", type=float, default=1.5, help="how long to listen for heartbeats")
     s.set_defaults(func=cmd_node)
+
+    s = sub.add_parser("keys", help="make CURVE keys for authenticated, encrypted tcp links")
+    s.add_argument("action", choices=["generate"])
+    s.add_argument("directory")
+    s.set_defaults(func=cmd_keys)
 
     s = sub.add_parser("schema", help="export the JSON Schema of every message")
     s.add_argument("--out", help="directory to write <schema>.schema.json files (default: print)")

@@ -21,6 +21,10 @@ def subscribe(graph: dict, topic: str, zctx: zmq.Context) -> zmq.Socket:
         raise SystemExit(f"no node of graph {graph['name']!r} publishes {topic!r} (topics: {', '.join(topics)})")
     sock = zctx.socket(zmq.SUB)
     sock.setsockopt(zmq.LINGER, 0)
+    if graph.get("curve_keys"):
+        from nodes.curve import secure_subscriber
+
+        secure_subscriber(sock, graph["curve_keys"])
     sock.setsockopt(zmq.SUBSCRIBE, topic.encode())
     for e in endpoints:
         sock.connect(e)

@@ -127,13 +127,22 @@ class NodeContext:
     # -- sockets ---------------------------------------------------------------------------------
     def open(self) -> None:
         spec = self.spec
+        self.authenticator = None
+        if spec.curve_keys:
+            from nodes import curve
+
+            self.authenticator = curve.start_authenticator(self.zctx, spec.curve_keys)
         if spec.pub_endpoint:
             self.pub = self.zctx.socket(zmq.XPUB)
+            if spec.curve_keys:
+                curve.secure_publisher(self.pub, spec.curve_keys)
             self.pub.setsockopt(zmq.XPUB_VERBOSE, 1)
             self.pub.setsockopt(zmq.SNDHWM, spec.hwm)
             self.pub.setsockopt(zmq.LINGER, 0)
             self.pub.bind(spec.pub_endpoint)
         self.sub = self.zctx.socket(zmq.SUB)
+        if spec.curve_keys:
+            curve.secure_subscriber(self.sub, spec.curve_keys)
         self.sub.setsockopt(zmq.RCVHWM, spec.hwm)
         self.sub.setsockopt(zmq.LINGER, 0)
         self.sub.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
@@ -147,6 +156,8 @@ class NodeContext:
         for s in (self.pub, self.sub):
             if s is not None:
                 s.close(linger=0)
+        if getattr(self, "authenticator", None) is not None:
+            self.authenticator.stop()
 
     def read_subscriptions(self) -> None:
         """Drain XPUB subscription notices (b'\\x01topic' / b'\\x00topic')."""

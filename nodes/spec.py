@@ -20,7 +20,7 @@ class NodeSpec(BaseModel):
     replica: int = 0
     replicas: int = 1
     hwm: int = Field(1000, description="ZeroMQ high-water mark: queued messages per peer before drops")
-    curve: dict[str, str] | None = None       # reserved for CURVE key files (issue 10)
+    curve_keys: str | None = None             # directory of CURVE keys (nodes/curve.py); None = plain
 
     def wire_topic(self, logical: str) -> str:
         """Remap, then prefix the namespace unless the name is absolute ("/x") or ``diagnostics`` (as in ROS)."""

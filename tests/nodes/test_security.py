@@ -1,0 +1,74 @@
+"""CURVE on tcp links: a subscriber without an authorized key receives nothing; everything on loopback."""
+import csv
+import socket
+import time
+
+import zmq
+import zmq.auth
+
+from mocap_cli.launch_file import load_launch_file
+from mocap_cli.launcher import plan
+from nodes import curve
+from tests.conftest import REPO, launched, wait_for
+
+
+def free_base_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1] - 20 if s.getsockname()[1] > 20000 else 30000
+
+
+def receive(endpoint: str, topic: bytes, keys: tuple | None, seconds: float = 2.0) -> int:
+    ctx = zmq.Context.instance()
+    sock = ctx.socket(zmq.SUB)
+    sock.setsockopt(zmq.LINGER, 0)
+    if keys is not None:
+        sock.curve_publickey, sock.curve_secretkey, sock.curve_serverkey = keys
+    sock.setsockopt(zmq.SUBSCRIBE, topic)
+    sock.connect(endpoint)
+    n, end = 0, time.monotonic() + seconds
+    while time.monotonic() < end:
+        if sock.poll(100):
+            sock.recv_multipart()
+            n += 1
+    sock.close()
+    return n
+
+
+def test_curve_refuses_unauthorized_subscribers(tmp_path):
+    keys = curve.generate(tmp_path / "keys")
+    port = free_base_port()
+    out = tmp_path / "frames.csv"
+    graph = f"""
+transport: {{kind: tcp, base_port: {port}, curve_keys: {keys}}}
+nodes:
+  - {{id: src, kind: synthetic_source, params: {{rate_hz: 200, frames: 0}}}}
+  - {{id: log, kind: frame_log, params: {{path: {out}}}, remaps: {{in: markers/raw}}}}
+"""
+    with launched(tmp_path, graph) as g:
+        wait_for(lambda: out.exists() and len(out.read_text().splitlines()) > 20, 30, "frames over CURVE")
+        src = next(n for n in g.registry()["nodes"] if n["id"] == "src")
+        assert src["endpoint"].startswith("tcp://127.0.0.1:")  # loopback unless told otherwise
+        server_public, _ = zmq.auth.load_certificate(str(keys / "server.key"))
+        client_public, client_secret = zmq.auth.load_certificate(str(keys / "client.key_secret"))
+        intruder_public, intruder_secret = zmq.curve_keypair()
+        assert receive(src["endpoint"], b"markers/raw", (client_public, client_secret, server_public)) > 50
+        assert receive(src["endpoint"], b"markers/raw", (intruder_public, intruder_secret, server_public)) == 0
+        assert receive(src["endpoint"], b"markers/raw", None) == 0
+        # the graph's own tools carry the keys
+        echo = g.cli("topic", "echo", "markers/raw", "--once", "--timeout", "5")
+        assert echo.returncode == 0 and "mocap.MarkerFrame" in echo.stdout
+
+
+def test_default_transport_is_private(tmp_path):
+    lf = load_launch_file(REPO / "launch" / "studio.yaml")
+    for p in plan(lf, "/tmp/x", "ipc:///tmp/x/control"):
+        assert p.spec.pub_endpoint.startswith("ipc://")
+    f = tmp_path / "g.yaml"
+    f.write_text("transport: {kind: ipc, curve_keys: /tmp/k}\nnodes: [{id: a, kind: relay}]\n")
+    import pytest
+
+    from mocap_cli.launch_file import LaunchError
+
+    with pytest.raises(LaunchError, match="set transport.kind: tcp"):
+        load_launch_file(f)
