@@ -139,7 +139,7 @@ class NodeContext:
             self.pub.setsockopt(zmq.XPUB_VERBOSE, 1)
             self.pub.setsockopt(zmq.SNDHWM, spec.hwm)
             self.pub.setsockopt(zmq.LINGER, 0)
-            self.pub.bind(spec.pub_endpoint)
+            self.pub.bind(spec.bind_endpoint or spec.pub_endpoint)
         self.sub = self.zctx.socket(zmq.SUB)
         if spec.curve_keys:
             curve.secure_subscriber(self.sub, spec.curve_keys)

@@ -13,7 +13,8 @@ class NodeSpec(BaseModel):
     params: dict[str, Any] = {}
     remaps: dict[str, str] = {}               # logical topic -> topic on the wire
     namespace: str = ""                       # prefix for every topic, e.g. "mocap/actor1"
-    pub_endpoint: str | None = None           # where this node's PUB socket binds
+    pub_endpoint: str | None = None           # where subscribers reach this node's PUB socket
+    bind_endpoint: str | None = None          # where it binds, when that differs (containers: tcp://*:PORT)
     sub_endpoints: dict[str, list[str]] = {}  # wire topic -> publisher endpoints to connect
     expected_subscribers: dict[str, int] = {} # wire topic -> subscriber count to wait for
     control_endpoint: str | None = None       # the launcher's ROUTER socket (ready/start handshake)
