@@ -170,6 +170,7 @@ class Heartbeat(Message):
     received: dict[str, int] = {}
     published: dict[str, int] = {}
     drops: dict[str, int] = {}           # per received topic: sequence gaps
+    lost_frames: dict[str, int] = {}     # per received topic: frames lost while a publisher restarted
     errors: dict[str, int] = {}          # per reason
     latency: Latency = Latency()         # entry_time -> receive, over the last second
     last_error: str = ""

@@ -49,6 +49,7 @@ class NodeEntry(BaseModel):
     replicas: int = Field(1, ge=1, le=64)
     respawn: bool = True
     hwm: int = Field(1000, ge=1, description="messages queued per peer before the newest are dropped")
+    keep_last: bool = Field(False, description="process only the newest queued frame; count the rest as drops")
     endpoint: str | None = Field(None, description="explicit endpoint to bind (multi-host graphs)")
 
 

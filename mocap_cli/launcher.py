@@ -80,7 +80,7 @@ def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
                 endpoint = f"ipc://{sock_dir}/{pid.replace('#', '-')}.pub"
             spec = NodeSpec(id=pid, kind=entry.kind, graph=lf.name, params=entry.params, remaps=entry.remaps,
                             namespace=lf.namespace, pub_endpoint=endpoint, control_endpoint=control_endpoint,
-                            replica=k, replicas=entry.replicas, hwm=entry.hwm,
+                            replica=k, replicas=entry.replicas, hwm=entry.hwm, keep_last=entry.keep_last,
                             curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
                             else None)
             procs.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn,

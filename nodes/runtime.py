@@ -85,13 +85,15 @@ class Node:
 
 
 class _TopicStats:
-    __slots__ = ("count", "window", "drops", "last_seq")
+    __slots__ = ("count", "window", "drops", "last_seq", "last_frame", "lost_frames")
 
     def __init__(self):
         self.count = 0
         self.window = collections.deque()   # receive/publish times over the last second
         self.drops = 0
         self.last_seq: dict[str, int] = {}
+        self.last_frame: dict[str, int] = {}
+        self.lost_frames = 0                # frames a restarted publisher never sent
 
     def rate(self, now: float) -> float:
         while self.window and self.window[0] < now - 1.0:
@@ -235,10 +237,17 @@ class NodeContext:
         last = st.last_seq.get(h.publisher)
         if last is not None and h.seq > last + 1:
             st.drops += h.seq - last - 1
+        elif last is not None and h.seq <= last:  # the publisher restarted: count the frames it missed
+            gap = h.frame - st.last_frame.get(h.publisher, h.frame) - 1
+            st.lost_frames += max(0, gap)
         st.last_seq[h.publisher] = h.seq
+        st.last_frame[h.publisher] = h.frame
         if h.entry_time_ns:
             self._latency_ns.append(time.time_ns() - h.entry_time_ns)
         return logical, msg
+
+    def skipped(self, wire_topic: bytes) -> None:
+        self._sub_stats[wire_topic.decode("utf-8", "replace")].drops += 1
 
     def _error(self, reason: str, text: str) -> None:
         self.errors[reason] += 1
@@ -268,6 +277,7 @@ class NodeContext:
             received={t: s.count for t, s in self._sub_stats.items()},
             published={t: s.count for t, s in self._pub_stats.items() if t != DIAGNOSTICS},
             drops={t: s.drops for t, s in self._sub_stats.items()},
+            lost_frames={t: s.lost_frames for t, s in self._sub_stats.items() if s.lost_frames},
             errors=dict(self.errors), latency=latency, last_error=self.last_error[:500],
         )
 
@@ -346,18 +356,23 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
             # zmq polls in whole milliseconds; below one, poll without blocking.
             events = dict(poller.poll(int(wait_s * 1000)))
             if ctx.sub in events:
-                for _ in range(1000):  # bounded batch so heartbeats and ticks still run under load
+                batch_end = time.monotonic() + 0.02
+                newest: dict[bytes, list] = {}
+                for _ in range(1000):  # bounded batch (count and time): heartbeats and ticks still run
+                    if time.monotonic() > batch_end:
+                        break
                     try:
                         frames = ctx.sub.recv_multipart(zmq.NOBLOCK)
                     except zmq.Again:
                         break
-                    got = ctx.receive(frames)
-                    if got is None:
+                    if spec.keep_last and len(frames) == 2:
+                        if frames[0] in newest:
+                            ctx.skipped(frames[0])  # keep-last: an older frame nobody will see
+                        newest[frames[0]] = frames
                         continue
-                    try:
-                        node.on_raw(frames[0].decode(), frames[1], got[1])
-                    except Exception as e:
-                        ctx.handler_error(got[0], e)
+                    _handle(ctx, node, frames)
+                for frames in newest.values():
+                    _handle(ctx, node, frames)
             if ctx.pub is not None and ctx.pub in events:
                 ctx.read_subscriptions()
             if control is not None and control in events:
@@ -394,6 +409,16 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
             control.close(linger=0)
         ctx.close()
     return code
+
+
+def _handle(ctx: NodeContext, node: Node, frames: list[bytes]) -> None:
+    got = ctx.receive(frames)
+    if got is None:
+        return
+    try:
+        node.on_raw(frames[0].decode(), frames[1], got[1])
+    except Exception as e:
+        ctx.handler_error(got[0], e)
 
 
 def _stamped(ctx: NodeContext, hb: Heartbeat) -> Heartbeat:

@@ -20,6 +20,8 @@ class NodeSpec(BaseModel):
     control_endpoint: str | None = None       # the launcher's ROUTER socket (ready/start handshake)
     replica: int = 0
     replicas: int = 1
+    keep_last: bool = Field(False, description="handle only the newest queued message per topic; older ones "
+                            "are dropped and counted (outputs that render, not stages that need every frame)")
     hwm: int = Field(1000, description="ZeroMQ high-water mark: queued messages per peer before drops")
     curve_keys: str | None = None             # directory of CURVE keys (nodes/curve.py); None = plain
 
