@@ -78,7 +78,7 @@ class QtmIngest(Node):
 
     def teardown(self) -> None:
         self.stopping.set()
-        self.thread.join(timeout=1.0)
+        self.thread.join(timeout=0.5)  # a daemon thread: never hold up the 2 s shutdown
 
     # -- the qtm-rt side, in its own thread ------------------------------------------------------------
     def _client_thread(self) -> None:
