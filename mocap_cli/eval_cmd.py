@@ -52,6 +52,9 @@ def add_parser(sub) -> None:
                    help="hide the markers that define the joint, or the localized joint (the thesis's way)")
     g.add_argument("--report", default="reports/gaps", help="directory for gaps.md, gaps.csv and the plots")
     g.add_argument("--no-plots", action="store_true")
+    g.add_argument("--swivel", action="store_true",
+                   help="beyond the thesis: a single missing joint from its bone lengths and the swivel angle "
+                        "carried in the parent's frame")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
                    help="beyond the thesis: close the gap to returning markers by at most M metres a frame "
                         "(0 = the thesis's method: jump)")
@@ -127,7 +130,7 @@ def run_gaps(args) -> int:
     combos = [(m, c, s) for m in modes for c in cons for s in solvers]
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
-                            fill_options={"reacquire_step_m": args.reacquire_step}))
+                            fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel}))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []

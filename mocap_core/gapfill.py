@@ -57,7 +57,7 @@ class LimbFiller:
     """Fills the gaps of one limb frame after frame. Owns the limb's previous solved chain."""
 
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0):
+                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -75,6 +75,11 @@ class LimbFiller:
         # gap between where IK had it and where the markers are is closed by at most this much per
         # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
         self.reacquire_step_m = reacquire_step_m
+        # Beyond the thesis: a single missing joint between two located ones (an elbow between
+        # shoulder and wrist, a knee between hip and ankle) lies on a circle fixed by its two bone
+        # lengths; where on it (the swivel angle) is carried over from the last frame in the frame of
+        # the limb's parent (chest or pelvis), not in world space. No iteration, no drift.
+        self.swivel = swivel
         self.blend_offset = np.zeros((n, 3))
         self.last_out: np.ndarray | None = None
         self.last_status: np.ndarray | None = None
@@ -86,6 +91,8 @@ class LimbFiller:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton)."""
         t0 = time.perf_counter()
         out = np.zeros(4)
+        if self.swivel and self.has_prev[0]:
+            out[0] += self._swivel_fill(positions, frames, status)
         p = self.params
         _fill_limb(positions, frames, status, self.joints, self.parent_of_root, self.limb.endswith("arm"),
                    self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
@@ -95,6 +102,49 @@ class LimbFiller:
             self._blend_reacquired(positions, status)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
+
+    def _swivel_fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
+        idx, n = self.joints, len(self.joints)
+        parent_now, parent_prev = frames[self.parent_of_root], self.prev_parent_frame
+        if not (np.isfinite(parent_now).all() and np.isfinite(parent_prev).all()):
+            return 0
+        filled = 0
+        for k in range(1, n - 1):
+            if not (status[idx[k]] == Status.MISSING and status[idx[k - 1]] != Status.MISSING
+                    and status[idx[k + 1]] != Status.MISSING):
+                continue
+            pp, pm, pt = self.prev_pos[k - 1], self.prev_pos[k], self.prev_pos[k + 1]
+            a, b = np.linalg.norm(pm - pp), np.linalg.norm(pt - pm)
+            root, target = positions[idx[k - 1]], positions[idx[k + 1]]
+            d = target - root
+            dist = np.linalg.norm(d)
+            if not (dist > 1e-9 and a > 0 and b > 0):
+                continue
+            axis = d / dist
+            along = np.clip((a * a - b * b + dist * dist) / (2 * dist), -a, a)
+            radius = np.sqrt(max(a * a - along * along, 0.0))
+            # the previous bend direction, carried to now in the frame of the located joint after the
+            # gap (the wrist for an elbow: it turns with the forearm), else in the limb parent's frame
+            d_prev = pt - pp
+            u_prev = (pm - pp) - ((pm - pp) @ d_prev) / (d_prev @ d_prev) * d_prev
+            ref_now, ref_prev = frames[idx[k + 1]], self.prev_frames[k + 1]
+            if not (np.isfinite(ref_now).all() and np.isfinite(ref_prev).all()):
+                ref_now, ref_prev = parent_now, parent_prev
+            u = ref_now @ (ref_prev.T @ u_prev)
+            u = u - (u @ axis) * axis
+            nu = np.linalg.norm(u)
+            if not nu > 1e-9:
+                continue
+            positions[idx[k]] = root + along * axis + radius * u / nu
+            status[idx[k]] = Status.ESTIMATED
+            filled += 1
+            # bone frames of the two bones now known
+            for j, child in ((k - 1, k), (k, k + 1)):
+                y = positions[idx[child]] - positions[idx[j]]
+                prev = frames[idx[j]] if np.isfinite(frames[idx[j]]).all() else parent_now @ parent_prev.T @ \
+                    self.prev_frames[j]
+                frames[idx[j]] = _frame_along(y, prev)
+        return filled
 
     def _blend_reacquired(self, positions: np.ndarray, status: np.ndarray) -> None:
         idx = self.joints
@@ -112,6 +162,13 @@ class LimbFiller:
                 positions[idx] += self.blend_offset
         self.last_out = positions[idx].copy()
         self.last_status = now.copy()
+
+
+def _frame_along(y: np.ndarray, like: np.ndarray) -> np.ndarray:
+    """A bone frame whose y runs along ``y``, turned from ``like`` by the shortest arc."""
+    from mocap_core.geometry import rotation_between
+
+    return rotation_between(like[:, 1], y) @ like
 
 
 @njit(cache=True)
@@ -194,9 +251,10 @@ class GapFiller:
     """All five limbs in graph order (torso first), for offline use; the nodes use LimbFiller."""
 
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0):
+                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False):
         constraints = constraints if constraints is not None else load_constraints()
-        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m) for limb in LIMB_ORDER}
+        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel)
+                      for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status) -> dict[str, FillStats]:
         return {limb: f.fill(positions, frames, status) for limb, f in self.limbs.items()}
