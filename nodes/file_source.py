@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet
+from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, Message
 from mocap_core.recordings import read_recording
 from nodes.runtime import Node
 
@@ -29,6 +29,9 @@ class Params(BaseModel):
     loop: bool = False
     start_s: float = Field(0.0, ge=0, description="start this many seconds into the take")
     max_frames: int = Field(0, ge=0, description="stop after this many frames; 0 = the whole take")
+    lockstep_topic: str | None = Field(None, description="for tests: send the next frame only once this topic "
+                                       "has carried the last one (e.g. skeleton/solved)")
+    lockstep_timeout_s: float = Field(2.0, gt=0)
 
 
 class FileSource(Node):
@@ -36,6 +39,14 @@ class FileSource(Node):
     Params = Params
     publishes = {"markers/raw": MarkerFrame, "markers/set": MarkerSet}
     is_source = True
+
+    @classmethod
+    def inputs(cls, params):
+        return {params.lockstep_topic: Message} if params.lockstep_topic else {}
+
+    def on_message(self, topic, msg) -> None:
+        if self.waiting_for is not None and msg.header.frame >= self.waiting_for:
+            self.waiting_for = None
 
     def setup(self) -> None:
         p = self.params
@@ -45,11 +56,18 @@ class FileSource(Node):
         self.index = self.first
         self.sent = 0
         self.next_set = 0.0
+        self.waiting_for: int | None = None
+        self.waiting_since = 0.0
         self.log.info("replaying %s: %d markers, %d frames at %.0f Hz", self.rec.source, len(self.rec.labels),
                       self.rec.n_frames, self.rate)
 
     def tick(self) -> float | None:
         p, rec = self.params, self.rec
+        if self.waiting_for is not None:
+            if time.monotonic() - self.waiting_since < p.lockstep_timeout_s:
+                return 0.0002
+            self.ctx._error("lockstep_timeout", f"no {p.lockstep_topic} for frame {self.waiting_for}; going on")
+            self.waiting_for = None
         if self.index >= rec.n_frames:
             if not p.loop:
                 return None
@@ -69,4 +87,7 @@ class FileSource(Node):
             labels=rec.labels, positions=pos, flags=flags))
         self.index += 1
         self.sent += 1
+        if p.lockstep_topic:
+            self.waiting_for, self.waiting_since = frame, time.monotonic()
+            return 0.0
         return 1.0 / self.rate

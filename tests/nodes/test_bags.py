@@ -110,3 +110,33 @@ def test_export_json_for_foxglove(raw_bag, tmp_path):
     assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
     body = json.loads(message.data)
     assert body["header"]["schema"] == "mocap.MarkerFrame" and body["positions"]["shape"] == [53, 3]
+
+
+def test_a_bag_feeds_mocap_solve_and_the_qtm_emulator(raw_bag, tmp_path):
+    from mocap_core.recordings import read_recording
+
+    rec = read_recording(raw_bag)
+    direct = read_recording(data_file(TAKE))
+    assert rec.labels == direct.labels and rec.n_frames == 240 and rec.rate_hz == pytest.approx(120)
+    np.testing.assert_array_equal(rec.positions, direct.positions[:240])
+    out = tmp_path / "joints.csv"
+    r = mocap("solve", str(raw_bag), "--profile", "vicon53", "--joints-out", str(out), "--quiet")
+    assert r.returncode == 0 and len(out.read_text().splitlines()) == 241
+    from mocap_cli.qtm_sim import QtmEmulator
+
+    assert QtmEmulator(rec).rec.n_frames == 240  # `mocap qtm-sim BAG.mcap` replays it
+
+
+def test_file_source_lockstep_waits_for_the_graph(tmp_path):
+    out = tmp_path / "solved.csv"
+    graph = f"""
+nodes:
+  - {{id: source, kind: file_source, params: {{path: {data_file(TAKE)}, max_frames: 60, rate_hz: 100000,
+      lockstep_topic: markers/relayed}}}}
+  - {{id: relay, kind: relay, remaps: {{in: markers/raw, out: markers/relayed}}}}
+  - {{id: log, kind: frame_log, params: {{path: {out}}}, remaps: {{in: markers/relayed}}}}
+"""
+    with launched(tmp_path, graph, "--until-done") as g:
+        g.proc.wait(timeout=60)
+    frames = [int(line.split(",")[0]) for line in out.read_text().splitlines()[1:]]
+    assert frames == list(range(60))
