@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import Message, decode
 from nodes.bags import bag_info, read_bag
+from nodes.lockstep import Lockstep
 from nodes.runtime import Node
 
 
@@ -51,22 +52,17 @@ class BagPlayer(Node):
         self.i = 0
         self.t0_bag = self.messages[0].log_time_ns
         self.t0 = None
-        self.waiting_for: int | None = None
-        self.waiting_since = 0.0
+        self.lockstep = Lockstep(self.ctx, p.lockstep_topic, p.lockstep_timeout_s)
         self.log.info("playing %d messages from %s", len(self.messages), p.path)
 
     def on_message(self, topic, msg) -> None:
-        if self.waiting_for is not None and msg.header.frame >= self.waiting_for:
-            self.waiting_for = None
+        self.lockstep.heard(msg.header.frame)
 
     def tick(self) -> float | None:
         p = self.params
         now = time.monotonic()
-        if self.waiting_for is not None:
-            if now - self.waiting_since < p.lockstep_timeout_s:
-                return 0.0002
-            self.ctx._error("lockstep_timeout", f"no {p.lockstep_topic} for frame {self.waiting_for}; going on")
-            self.waiting_for = None
+        if self.lockstep.blocked():
+            return 0.0002
         if self.i >= len(self.messages):
             if not p.loop:
                 return None
@@ -81,8 +77,7 @@ class BagPlayer(Node):
         self._send(m)
         self.i += 1
         if p.lockstep_topic and m.topic == p.lockstep_after:
-            self.waiting_for = decode(m.data, m.topic).header.frame
-            self.waiting_since = time.monotonic()
+            self.lockstep.sent(decode(m.data, m.topic).header.frame)
             return 0.0002
         if self.i < len(self.messages) and not p.lockstep_topic:
             nxt = self.t0 + (self.messages[self.i].log_time_ns - self.t0_bag) / 1e9 / p.rate

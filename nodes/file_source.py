@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, Message
 from mocap_core.recordings import read_recording
+from nodes.lockstep import Lockstep
 from nodes.runtime import Node
 
 SET_PERIOD_S = 1.0
@@ -45,8 +46,7 @@ class FileSource(Node):
         return {params.lockstep_topic: Message} if params.lockstep_topic else {}
 
     def on_message(self, topic, msg) -> None:
-        if self.waiting_for is not None and msg.header.frame >= self.waiting_for:
-            self.waiting_for = None
+        self.lockstep.heard(msg.header.frame)
 
     def setup(self) -> None:
         p = self.params
@@ -56,18 +56,14 @@ class FileSource(Node):
         self.index = self.first
         self.sent = 0
         self.next_set = 0.0
-        self.waiting_for: int | None = None
-        self.waiting_since = 0.0
+        self.lockstep = Lockstep(self.ctx, p.lockstep_topic, p.lockstep_timeout_s)
         self.log.info("replaying %s: %d markers, %d frames at %.0f Hz", self.rec.source, len(self.rec.labels),
                       self.rec.n_frames, self.rate)
 
     def tick(self) -> float | None:
         p, rec = self.params, self.rec
-        if self.waiting_for is not None:
-            if time.monotonic() - self.waiting_since < p.lockstep_timeout_s:
-                return 0.0002
-            self.ctx._error("lockstep_timeout", f"no {p.lockstep_topic} for frame {self.waiting_for}; going on")
-            self.waiting_for = None
+        if self.lockstep.blocked():
+            return 0.0002
         if self.index >= rec.n_frames:
             if not p.loop:
                 return None
@@ -88,6 +84,6 @@ class FileSource(Node):
         self.index += 1
         self.sent += 1
         if p.lockstep_topic:
-            self.waiting_for, self.waiting_since = frame, time.monotonic()
+            self.lockstep.sent(frame)
             return 0.0
         return 1.0 / self.rate

@@ -68,6 +68,21 @@ class Graph:
         return subprocess.run([sys.executable, "-m", "mocap_cli.main", *args], cwd=REPO, env=self.env(),
                               capture_output=True, text=True, timeout=timeout)
 
+    def heartbeats(self, seconds: float = 2.5) -> dict:
+        """The latest heartbeat of every node, as `mocap node list` sees them."""
+        from mocap_cli import topic_tools
+        from mocap_cli.graph_registry import find_graph
+
+        old = os.environ.get("MOCAP_RUN_DIR")
+        os.environ["MOCAP_RUN_DIR"] = str(self.run_dir)
+        try:
+            return topic_tools.collect_heartbeats(find_graph(self.name), seconds)
+        finally:
+            if old is None:
+                del os.environ["MOCAP_RUN_DIR"]
+            else:
+                os.environ["MOCAP_RUN_DIR"] = old
+
     def env(self) -> dict:
         return {**os.environ, "MOCAP_RUN_DIR": str(self.run_dir)}
 
@@ -77,6 +92,16 @@ class Graph:
             self.proc.send_signal(signal.SIGINT)
             self.proc.wait(timeout=timeout)
         return time.monotonic() - t
+
+
+def pipeline_graph(source: str, profile: str = "qualisys_sports", up_axis: str = "z", extra: str = "") -> str:
+    """The full graph of DESIGN (source -> ... -> retarget) as launch-file text, with extra nodes."""
+    limbs = "".join(f"  - {{id: {limb}, kind: ik_gapfill, params: {{limb: {limb}}}}}\n"
+                    for limb in ("torso", "left_arm", "right_arm", "left_leg", "right_leg"))
+    return (f"nodes:\n  - {{id: source, kind: file_source, params: {source}}}\n"
+            f"  - {{id: hips, kind: hip_interpolation, params: {{profile: {profile}}}}}\n"
+            f"  - {{id: localize, kind: joint_localization, params: {{profile: {profile}}}}}\n"
+            f"{limbs}  - {{id: retarget, kind: retarget, params: {{up_axis: {up_axis}}}}}\n{extra}\n")
 
 
 @contextlib.contextmanager

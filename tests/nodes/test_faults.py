@@ -6,25 +6,14 @@ import time
 
 import pytest
 
-from tests.conftest import data_file, launched, wait_for
+from tests.conftest import data_file, launched, pipeline_graph, wait_for
 
 TAKE = "02_qualisys_walking_ezc3d_Qualisys.c3d"
 
 
 def graph(tmp_path, extra="", log_topic="skeleton/solved"):
-    return f"""
-nodes:
-  - {{id: source, kind: file_source, params: {{path: {data_file(TAKE)}, loop: true}}}}
-  - {{id: hips, kind: hip_interpolation, params: {{profile: qualisys_sports}}}}
-  - {{id: localize, kind: joint_localization, params: {{profile: qualisys_sports}}}}
-  - {{id: torso, kind: ik_gapfill, params: {{limb: torso}}}}
-  - {{id: left_arm, kind: ik_gapfill, params: {{limb: left_arm}}}}
-  - {{id: right_arm, kind: ik_gapfill, params: {{limb: right_arm}}}}
-  - {{id: left_leg, kind: ik_gapfill, params: {{limb: left_leg}}}}
-  - {{id: right_leg, kind: ik_gapfill, params: {{limb: right_leg}}}}
-  - {{id: retarget, kind: retarget, params: {{up_axis: z}}}}
-  - {{id: log, kind: frame_log, params: {{path: {tmp_path / 'out.csv'}}}, remaps: {{in: {log_topic}}}}}
-{extra}"""
+    log = f"  - {{id: log, kind: frame_log, params: {{path: {tmp_path / 'out.csv'}}}, remaps: {{in: {log_topic}}}}}\n"
+    return pipeline_graph(f"{{path: {data_file(TAKE)}, loop: true}}", extra=log + extra)
 
 
 def lines(path):
@@ -43,21 +32,10 @@ def test_kill_9_in_the_middle_restarts_and_counts_lost_frames(tmp_path, victim):
         wait_for(lambda: lines(out) > n + 30, 20, "frames after the restart")
         recovered_s = time.monotonic() - killed_at
         downstream = "torso" if victim == "localize" else "retarget"
-        nodes = g.cli("node", "list")
-        assert nodes.returncode == 0
-        beats = __import__("json")
-        from mocap_cli import topic_tools
-        from mocap_cli.graph_registry import find_graph
-
-        os.environ["MOCAP_RUN_DIR"] = str(g.run_dir)
-        try:
-            hb = topic_tools.collect_heartbeats(find_graph(g.name), 2.5)
-        finally:
-            del os.environ["MOCAP_RUN_DIR"]
+        hb = g.heartbeats()
         lost = sum(hb[downstream].lost_frames.values()) + sum(hb[downstream].drops.values())
         assert lost > 0, f"{downstream} did not count the frames {victim} lost"
         print(f"{victim}: graph producing again {recovered_s:.2f} s after kill -9; {downstream} counted {lost} lost")
-        del beats
 
 
 def test_slow_consumer_has_its_drops_counted_and_others_stay_fast(tmp_path):
@@ -66,14 +44,7 @@ def test_slow_consumer_has_its_drops_counted_and_others_stay_fast(tmp_path):
     with launched(tmp_path, graph(tmp_path, extra, log_topic="markers/raw")) as g:
         wait_for(lambda: lines(out) > 400, 60, "frames at the fast sink")
         time.sleep(2.5)
-        from mocap_cli import topic_tools
-        from mocap_cli.graph_registry import find_graph
-
-        os.environ["MOCAP_RUN_DIR"] = str(g.run_dir)
-        try:
-            hb = topic_tools.collect_heartbeats(find_graph(g.name), 2.5)
-        finally:
-            del os.environ["MOCAP_RUN_DIR"]
+        hb = g.heartbeats()
         assert sum(hb["slow"].drops.values()) > 50, hb["slow"]
     with open(out) as f:
         lat = sorted(float(r["latency_us"]) for r in csv.DictReader(f))

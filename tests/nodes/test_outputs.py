@@ -16,7 +16,7 @@ from mocap_core.joints_csv import read_joints_csv
 from mocap_core.rig import BONE_JOINT, BONE_PARENT, BONES, to_canonical, to_unity_position
 from mocap_core.skeleton import JOINTS, Status
 from nodes.bags import read_bag
-from tests.conftest import REPO, data_file, launched, wait_for
+from tests.conftest import REPO, data_file, launched, pipeline_graph, wait_for
 
 TAKE = "02_qualisys_walking_ezc3d_Qualisys.c3d"
 ARTIFACTS = REPO / "artifacts"
@@ -29,18 +29,7 @@ def free_port(kind=socket.SOCK_STREAM) -> int:
 
 
 def pipeline(tmp_path, frames, extra=""):
-    return f"""
-nodes:
-  - {{id: source, kind: file_source, params: {{path: {data_file(TAKE)}, max_frames: {frames}}}}}
-  - {{id: hips, kind: hip_interpolation, params: {{profile: qualisys_sports}}}}
-  - {{id: localize, kind: joint_localization, params: {{profile: qualisys_sports}}}}
-  - {{id: torso, kind: ik_gapfill, params: {{limb: torso}}}}
-  - {{id: left_arm, kind: ik_gapfill, params: {{limb: left_arm}}}}
-  - {{id: right_arm, kind: ik_gapfill, params: {{limb: right_arm}}}}
-  - {{id: left_leg, kind: ik_gapfill, params: {{limb: left_leg}}}}
-  - {{id: right_leg, kind: ik_gapfill, params: {{limb: right_leg}}}}
-  - {{id: retarget, kind: retarget, params: {{up_axis: z}}}}
-{extra}"""
+    return pipeline_graph(f"{{path: {data_file(TAKE)}, max_frames: {frames}}}", extra=extra)
 
 
 def test_vmc_stream_reproduces_the_solved_skeleton(tmp_path):
@@ -145,7 +134,7 @@ def test_viewer_draws_a_moving_skeleton_in_headless_chromium(tmp_path):
         pytest.fail("chromium is not installed: `make test` installs Debian's chromium package")
     port = free_port()
     extra = f"  - {{id: viewer, kind: viewer, params: {{port: {port}, up_axis: z}}}}"
-    graph = pipeline(tmp_path, 0, extra).replace("max_frames: 0", "loop: true")
+    graph = pipeline_graph(f"{{path: {data_file(TAKE)}, loop: true}}", extra=extra)
     with launched(tmp_path, graph) as g:
         url = f"http://127.0.0.1:{port}/"
         wait_for(lambda: b'"skeleton": {' in _get(url + "state"), 60, "the viewer to get skeletons")
