@@ -12,17 +12,18 @@ from mocap_cli.launch_file import load_launch_file
 from mocap_cli.launcher import Launcher
 
 REPO = Path(__file__).resolve().parents[1]
-DEMO_LAUNCH = REPO / "launch" / "studio.yaml"
+DEMO_LAUNCH = REPO / "launch" / "demo.yaml"
 log = logging.getLogger("mocap.demo")
 
 
 def add_parser(sub) -> None:
     s = sub.add_parser("demo", help="run the full graph on a built-in take, with the live viewer",
-                       description="Launch launch/studio.yaml: a real Vicon take with real marker gaps "
-                                   "(../shared/data) through every node, with the web viewer. Runs the take once "
+                       description="Launch launch/demo.yaml: a synthetic running take in the PAF marker set "
+                                   "(made on the fly: no recording needed) through every node, with the web viewer; "
+                                   "--launch launch/studio.yaml runs a real Vicon take instead. Runs the take once "
                                    "(--loop to repeat until Ctrl-C, --seconds to stop earlier), then prints "
                                    "frames, latency and how many joints IK estimated.")
-    s.add_argument("--launch", default=str(DEMO_LAUNCH), help="launch file (default launch/studio.yaml)")
+    s.add_argument("--launch", default=str(DEMO_LAUNCH), help="launch file (default launch/demo.yaml)")
     s.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node param")
     s.add_argument("--loop", action="store_true", help="replay the take until Ctrl-C")
     s.add_argument("--seconds", type=float, help="stop after this many seconds")

@@ -158,6 +158,13 @@ def read_mat(path: Path, take: str | None = None) -> Recording:
 def read_recording(path: str | Path, take: str | None = None) -> Recording:
     """Read a C3D, TRC or MAT file (``file.mat:take`` picks a take of a MAT file)."""
     text = str(path)
+    if text.startswith("synthetic:"):
+        from mocap_core.synthetic import from_spec
+
+        try:
+            return from_spec(text)
+        except ValueError as e:
+            raise RecordingError(str(e)) from None
     if take is None and ".mat:" in text:
         text, take = text.rsplit(":", 1)
     path = Path(text)

@@ -18,7 +18,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def resolve_path(path: str) -> str:
     """Relative paths are tried from the working directory, then from the repository root."""
-    if Path(path.split(".mat:")[0]).exists() or Path(path).is_absolute():
+    if path.startswith("synthetic:") or Path(path.split(".mat:")[0]).exists() or Path(path).is_absolute():
         return path
     return str(REPO / path)  # re-send the marker set so late subscribers and tools learn the labels
 
