@@ -9,11 +9,12 @@ import pytest
 from tests.conftest import data_file, launched, pipeline_graph, wait_for
 
 TAKE = "02_qualisys_walking_ezc3d_Qualisys.c3d"
+LONG_TAKE = "08_cmu_135_02_karate_kata.c3d"
 
 
-def graph(tmp_path, extra="", log_topic="skeleton/solved"):
+def graph(tmp_path, extra="", log_topic="skeleton/solved", take=TAKE, profile="qualisys_sports"):
     log = f"  - {{id: log, kind: frame_log, params: {{path: {tmp_path / 'out.csv'}}}, remaps: {{in: {log_topic}}}}}\n"
-    return pipeline_graph(f"{{path: {data_file(TAKE)}, loop: true}}", extra=log + extra)
+    return pipeline_graph(f"{{path: {data_file(take)}, loop: true}}", profile, extra=log + extra)
 
 
 def lines(path):
@@ -23,7 +24,8 @@ def lines(path):
 @pytest.mark.parametrize("victim", ["localize", "left_leg"])
 def test_kill_9_in_the_middle_restarts_and_counts_lost_frames(tmp_path, victim):
     out = tmp_path / "out.csv"
-    with launched(tmp_path, graph(tmp_path)) as g:
+    # a 43 s take, so the frame numbers do not wrap around while the node restarts
+    with launched(tmp_path, graph(tmp_path, take=LONG_TAKE, profile="cmu41")) as g:
         wait_for(lambda: lines(out) > 100, 60, "solved frames")
         os.kill(g.node_pids()[victim], signal.SIGKILL)
         killed_at = time.monotonic()
