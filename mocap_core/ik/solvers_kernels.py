@@ -129,7 +129,7 @@ def _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
 
 @njit(cache=True)
 def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained,
-          max_iter, stop_m, escape_step_deg, escape_max_deg, escape_patience=4):
+          max_iter, stop_m, escape_step_deg, escape_max_deg, escape_patience=2):
     """Run a solver on the chain in place; returns (iterations, residual distance in metres).
 
     An unreachable target (farther than the chain is long) gets the chain stretched straight at
