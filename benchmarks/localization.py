@@ -8,7 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mocap_core.hip_interpolation import HIP_INDEX, HipInterpolator  # noqa: E402

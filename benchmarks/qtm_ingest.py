@@ -12,11 +12,8 @@ import argparse
 import csv
 import os
 import signal
-import socket
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +22,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from mocap_cli.launch_file import LaunchFile  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
+from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
 
@@ -34,17 +32,8 @@ def main():
     ap.add_argument("--seconds", type=float, default=60)
     ap.add_argument("--rate", type=float, default=1000)
     args = ap.parse_args()
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    tmp = Path(tempfile.mkdtemp())
-    ready = tmp / "port"
-    sim = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "--log-level", "WARNING", "qtm-sim", str(TAKE),
-                            "--port", str(port), "--rate", str(args.rate), "--loop", "--ready-file", str(ready)],
-                           cwd=REPO)
-    while not ready.exists():
-        time.sleep(0.05)
-    out = tmp / "raw.csv"
+    sim, port = start_emulator(str(TAKE), "--rate", str(args.rate), "--loop", cwd=str(REPO))
+    out = Path(tempfile.mkdtemp()) / "raw.csv"
     lf = LaunchFile.model_validate({"name": f"bench-qtm-{os.getpid()}", "nodes": [
         {"id": "qtm", "kind": "qtm_ingest", "params": {"port": port}},
         {"id": "sink", "kind": "frame_log", "params": {"path": str(out)}, "remaps": {"in": "markers/raw"}}]})

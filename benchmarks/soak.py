@@ -9,8 +9,6 @@ import argparse
 import csv
 import json
 import signal
-import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -24,6 +22,7 @@ sys.path.insert(0, str(REPO))
 from mocap_cli.graph_registry import registry_path  # noqa: E402
 from mocap_cli.launch_file import NodeEntry, load_launch_file  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
+from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
 
@@ -44,16 +43,8 @@ def main():
     ap.add_argument("--minutes", type=float, default=10)
     ap.add_argument("--rate", type=float, default=1000)
     args = ap.parse_args()
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    tmp = Path(tempfile.mkdtemp())
-    ready, out = tmp / "port", tmp / "solved.csv"
-    sim = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "--log-level", "WARNING", "qtm-sim", str(TAKE),
-                            "--port", str(port), "--rate", str(args.rate), "--loop", "--ready-file", str(ready)],
-                           cwd=REPO)
-    while not ready.exists():
-        time.sleep(0.05)
+    sim, port = start_emulator(str(TAKE), "--rate", str(args.rate), "--loop", cwd=str(REPO))
+    out = Path(tempfile.mkdtemp()) / "solved.csv"
     lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [f"qtm.port={port}", "hips.profile=cmu41",
                                                                 "localize.profile=cmu41", "retarget.up_axis=z"])
     lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]

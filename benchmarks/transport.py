@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import zmq
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from messages import MarkerFrame, decode, encode  # noqa: E402

@@ -177,9 +177,6 @@ def run_gaps(args) -> int:
 
 def run_latency(args) -> int:
     import signal
-    import socket
-    import subprocess
-    import sys
     import tempfile
 
     import numpy as np
@@ -187,17 +184,11 @@ def run_latency(args) -> int:
     from mocap_cli.bare_chain import bare_chain
     from mocap_cli.launch_file import load_launch_file
     from mocap_cli.launcher import Launcher
+    from mocap_cli.qtm_sim import start_emulator
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    tmp = Path(tempfile.mkdtemp(prefix="mocap-latency-"))
-    ready, solved = tmp / "port", tmp / "solved.csv"
-    sim = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "--log-level", "WARNING", "qtm-sim", args.take,
-                            "--port", str(port), "--rate", str(args.rate), "--loop", "--ready-file", str(ready)])
+    solved = Path(tempfile.mkdtemp(prefix="mocap-latency-")) / "solved.csv"
+    sim, port = start_emulator(args.take, "--rate", str(args.rate), "--loop")
     try:
-        while not ready.exists():
-            time.sleep(0.05)
         lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [
             f"qtm.port={port}", f"hips.profile={args.profile}", f"localize.profile={args.profile}",
             "retarget.up_axis=z"])

@@ -302,3 +302,23 @@ def run(args) -> int:
     emulator = QtmEmulator(rec, args.rate, args.loop, args.up_axis, faults)
     asyncio.run(serve(emulator, args.host, args.port, args.ready_file))
     return 0
+
+
+def start_emulator(take: str, *args: str, cwd: str | None = None):
+    """Run `mocap qtm-sim TAKE ARGS` as a subprocess on a free port; returns (process, port) once it
+    listens (for benchmarks and `mocap eval latency`). Stop it with SIGINT."""
+    import subprocess
+    import sys
+    import tempfile
+    import time
+    from pathlib import Path
+
+    ready = Path(tempfile.mkdtemp(prefix="mocap-qtm-")) / "port"
+    proc = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "--log-level", "WARNING", "qtm-sim", str(take),
+                             "--port", "0", "--ready-file", str(ready), *args], cwd=cwd)
+    deadline = time.monotonic() + 30
+    while not (ready.exists() and ready.read_text()):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"qtm-sim did not start (exit code {proc.poll()})")
+        time.sleep(0.05)
+    return proc, int(ready.read_text())

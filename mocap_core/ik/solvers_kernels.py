@@ -6,7 +6,6 @@ step (when on), and the deadlock escape when the end effector stops getting clos
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit

@@ -29,7 +29,6 @@ def test_all_three_seen_pass_through_and_become_last_known():
 
 
 def test_one_missing_follows_the_rotation_of_the_two_seen():
-    h = primed()
     r = rotz(30)
     moved = TRIANGLE @ r.T + [0.2, 0.1, 0.0]   # the pelvis turned 30 degrees about vertical and moved
     for missing in range(3):

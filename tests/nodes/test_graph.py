@@ -2,7 +2,6 @@
 import csv
 import os
 import signal
-import time
 
 from tests.conftest import launched, pid_alive, wait_for
 

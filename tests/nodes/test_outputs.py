@@ -10,7 +10,7 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
-from messages import RigPose, SkeletonFrame, decode
+from messages import decode
 from mocap_core.ik.kernels import quats_to_frames
 from mocap_core.joints_csv import read_joints_csv
 from mocap_core.rig import BONE_JOINT, BONE_PARENT, BONES, to_canonical, to_unity_position

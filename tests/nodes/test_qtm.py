@@ -1,7 +1,6 @@
 """The official qtm-rt client against our QTM emulator over real TCP, and the ingest node's recovery."""
 import asyncio
 import csv
-import math
 import os
 import signal
 import socket

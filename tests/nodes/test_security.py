@@ -1,5 +1,4 @@
 """CURVE on tcp links: a subscriber without an authorized key receives nothing; everything on loopback."""
-import csv
 import socket
 import time
 
