@@ -34,9 +34,13 @@ def test_kill_9_in_the_middle_restarts_and_counts_lost_frames(tmp_path, victim):
         wait_for(lambda: lines(out) > n + 30, 20, "frames after the restart")
         recovered_s = time.monotonic() - killed_at
         downstream = "torso" if victim == "localize" else "retarget"
-        hb = g.heartbeats()
-        lost = sum(hb[downstream].lost_frames.values()) + sum(hb[downstream].drops.values())
-        assert lost > 0, f"{downstream} did not count the frames {victim} lost"
+
+        def counted():
+            hb = g.heartbeats(1.2).get(downstream)
+            return hb is not None and sum(hb.lost_frames.values()) + sum(hb.drops.values())
+
+        # skeletons keep flowing while a limb is dead (held), so wait for the restarted node's frames
+        lost = wait_for(counted, 30, f"{downstream} to count the frames {victim} lost")
         print(f"{victim}: graph producing again {recovered_s:.2f} s after kill -9; {downstream} counted {lost} lost")
 
 
