@@ -116,6 +116,7 @@ class Launcher:
         self.stop_requested = False
         self.t0 = time.monotonic()
         self.registry = registry_path(lf.name)
+        self.standby: subprocess.Popen | None = None
 
     # -- processes -----------------------------------------------------------------------------------
     def _spawn(self, p: Proc) -> None:
@@ -124,6 +125,24 @@ class Launcher:
         p.started_at = time.monotonic()
         p.ready = False
         p.identity = None
+
+    def _spawn_standby(self) -> None:
+        """Keep one warm spare process: a restart hands it the dead node's spec instead of paying
+        for a new python's start-up and kernel loading."""
+        self.standby = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby"], stdin=subprocess.PIPE)
+
+    def _respawn(self, p: Proc) -> None:
+        spare, self.standby = self.standby, None
+        if spare is not None and spare.poll() is None:
+            try:
+                spare.stdin.write(p.spec.model_dump_json().encode() + b"\n")
+                spare.stdin.close()
+                p.popen, p.started_at, p.ready, p.identity = spare, time.monotonic(), False, None
+            except OSError:
+                self._spawn(p)
+        else:
+            self._spawn(p)
+        self._spawn_standby()
 
     def _write_registry(self) -> None:
         write_registry(self.lf.name, {
@@ -138,6 +157,7 @@ class Launcher:
     def start(self) -> None:
         for p in self.procs:
             self._spawn(p)
+        self._spawn_standby()
         self._write_registry()
         log.info("graph %s: started %d node processes", self.lf.name, len(self.procs))
 
@@ -170,7 +190,7 @@ class Launcher:
             if p.popen is None:
                 if p.restart_at is not None and now >= p.restart_at:
                     p.restart_at = None
-                    self._spawn(p)
+                    self._respawn(p)
                     self._write_registry()
                     log.warning("restarted node %s (restart #%d, pid %d)", p.spec.id, p.restarts, p.popen.pid)
                 continue
@@ -228,6 +248,9 @@ class Launcher:
         return 0
 
     def stop(self) -> None:
+        if self.standby is not None and self.standby.poll() is None:
+            self.standby.kill()  # holds no state
+            self.standby.wait()
         alive = [p for p in self.procs if p.popen is not None and p.popen.poll() is None]
         for p in alive:
             p.popen.send_signal(signal.SIGTERM)
