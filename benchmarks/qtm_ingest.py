@@ -9,7 +9,6 @@ sent that never arrived.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import signal
 import sys
@@ -22,6 +21,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from mocap_cli.launch_file import LaunchFile  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
+from mocap_cli.measure import frame_log_figures  # noqa: E402
 from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
@@ -42,15 +42,11 @@ def main():
     finally:
         sim.send_signal(signal.SIGINT)
         sim.wait()
-    with open(out) as f:
-        rows = list(csv.DictReader(f))
-    seq = np.array([int(r["seq"]) for r in rows])
-    lat = np.array([float(r["latency_us"]) for r in rows])
-    gaps = int((np.diff(seq) - 1).clip(min=0).sum())
-    span = (seq[-1] - seq[0] + 1)
-    print(f"{len(rows)} frames in {args.seconds:.0f} s at {args.rate:.0f} Hz requested "
-          f"({len(rows) / args.seconds:.0f} Hz received over the run, including start-up)")
-    print(f"dropped between ingest and subscriber (sequence gaps): {gaps} of {span}")
+    lat_ms, gaps = frame_log_figures(out)
+    lat = lat_ms * 1000
+    print(f"{len(lat)} frames in {args.seconds:.0f} s at {args.rate:.0f} Hz requested "
+          f"({len(lat) / args.seconds:.0f} Hz received over the run, including start-up)")
+    print(f"dropped between ingest and subscriber (sequence gaps): {gaps} of {len(lat) + gaps}")
     print(f"latency ingest -> subscriber: p50 {np.percentile(lat, 50):.0f} us, p99 {np.percentile(lat, 99):.0f} us, "
           f"max {lat.max():.0f} us")
 

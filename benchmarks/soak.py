@@ -6,7 +6,6 @@ Reports drops, throughput and each node's RSS at the start and the end (memory m
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import signal
 import sys
@@ -20,8 +19,8 @@ import psutil
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from mocap_cli.graph_registry import registry_path  # noqa: E402
-from mocap_cli.launch_file import NodeEntry, load_launch_file  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
+from mocap_cli.measure import frame_log_figures, live_graph  # noqa: E402
 from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
@@ -45,11 +44,7 @@ def main():
     args = ap.parse_args()
     sim, port = start_emulator(str(TAKE), "--rate", str(args.rate), "--loop", cwd=str(REPO))
     out = Path(tempfile.mkdtemp()) / "solved.csv"
-    lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [f"qtm.port={port}", "hips.profile=cmu41",
-                                                                "localize.profile=cmu41", "retarget.up_axis=z"])
-    lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]
-    lf.nodes.append(NodeEntry(id="log", kind="frame_log", params={"path": str(out)}, remaps={"in": "skeleton/solved"}))
-    lf.name = "soak"
+    lf = live_graph(port, "cmu41", out, "soak")
     seconds = args.minutes * 60
     samples = {}
 
@@ -65,11 +60,8 @@ def main():
     finally:
         sim.send_signal(signal.SIGINT)
         sim.wait()
-    with open(out) as f:
-        rows = list(csv.DictReader(f))
-    seqs = [int(r["seq"]) for r in rows]
-    gaps = sum(max(0, b - a - 1) for a, b in zip(seqs, seqs[1:]))
-    print(f"{len(rows)} skeletons in {seconds:.0f} s ({len(rows) / seconds:.0f} Hz; QTM at {args.rate:.0f} Hz); "
+    lat, gaps = frame_log_figures(out)
+    print(f"{len(lat)} skeletons in {seconds:.0f} s ({len(lat) / seconds:.0f} Hz; QTM at {args.rate:.0f} Hz); "
           f"sequence gaps at the sink: {gaps}")
     print(f"{'node':<12} {'RSS start MB':>13} {'RSS end MB':>11}")
     for node in samples.get("start", {}):

@@ -182,36 +182,27 @@ def run_latency(args) -> int:
     import numpy as np
 
     from mocap_cli.bare_chain import bare_chain
-    from mocap_cli.launch_file import load_launch_file
     from mocap_cli.launcher import Launcher
+    from mocap_cli.measure import frame_log_figures, live_graph
     from mocap_cli.qtm_sim import start_emulator
 
     solved = Path(tempfile.mkdtemp(prefix="mocap-latency-")) / "solved.csv"
     sim, port = start_emulator(args.take, "--rate", str(args.rate), "--loop")
     try:
-        lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [
-            f"qtm.port={port}", f"hips.profile={args.profile}", f"localize.profile={args.profile}",
-            "retarget.up_axis=z"])
-        lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]
-        from mocap_cli.launch_file import NodeEntry
-
-        lf.nodes.append(NodeEntry(id="log", kind="frame_log", params={"path": str(solved)},
-                                  remaps={"in": "skeleton/solved"}))
-        lf.name = f"latency-{int(time.time())}"
-        Launcher(lf).run(duration_s=args.seconds)
+        Launcher(live_graph(port, args.profile, solved, f"latency-{int(time.time())}")).run(duration_s=args.seconds)
     finally:
         sim.send_signal(signal.SIGINT)
         sim.wait()
-    with open(solved) as f:
-        rows = list(csv.DictReader(f))
-    lat = np.array([float(r["latency_us"]) for r in rows]) / 1000
+    lat, drops = frame_log_figures(solved)
+    frames_out = len(lat)
+    if frames_out < 10:
+        log.error("only %d frames reached skeleton/solved in %.0f s: run longer (--seconds)", frames_out, args.seconds)
+        return 1
     lat = lat[len(lat) // 10:]  # leave out the first 10% (start-up)
-    seq = np.array([int(r["seq"]) for r in rows])
-    drops = int((np.diff(seq) - 1).clip(min=0).sum())
     hops = 6  # ingest -> hips -> localize -> torso -> limb -> retarget -> log
     bare = bare_chain(hops, min(3000, int(args.rate * 10)), args.rate) / 1000
     md = [f"Full graph fed by the QTM emulator at {args.rate:.0f} Hz for {args.seconds:.0f} s "
-          f"({len(rows)} frames out of skeleton/solved); latency from entering qtm_ingest to leaving retarget, ms.", "",
+          f"({frames_out} frames out of skeleton/solved); latency from entering qtm_ingest to leaving retarget, ms.", "",
           "| chain | hops | p50 | p99 | max | dropped |", "|---|---|---|---|---|---|",
           f"| mocap graph | {hops} | {np.percentile(lat, 50):.2f} | {np.percentile(lat, 99):.2f} | {lat.max():.2f} | "
           f"{drops} |",

@@ -12,8 +12,8 @@ from typing import Iterator
 import numpy as np
 
 from mocap_core.gapfill import GapFiller
-from mocap_core.geometry import matrix_to_quat
 from mocap_core.hip_interpolation import HipInterpolator
+from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.localization import Localizer
@@ -28,7 +28,8 @@ class SolvedChunk:
     status: np.ndarray         # (F, J)
 
     def quaternions(self) -> np.ndarray:
-        return matrix_to_quat(self.frames)
+        f = np.ascontiguousarray(self.frames, np.float64)
+        return frames_to_quats(f.reshape(-1, 3, 3)).reshape(f.shape[:-2] + (4,))
 
 
 class SkeletonPipeline:

@@ -1,0 +1,32 @@
+"""Shared by `mocap eval latency` and the benchmarks: the live graph fed by the QTM emulator with a
+frame log at its end, and the figures read back from that log."""
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from mocap_cli.launch_file import LaunchFile, NodeEntry, load_launch_file
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def live_graph(port: int, profile: str, log_path: str | Path, name: str, up_axis: str = "z") -> LaunchFile:
+    """launch/qtm_studio.yaml pointed at the emulator, without the viewer and VMC, logging skeleton/solved."""
+    lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [
+        f"qtm.port={port}", f"hips.profile={profile}", f"localize.profile={profile}", f"retarget.up_axis={up_axis}"])
+    lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]
+    lf.nodes.append(NodeEntry(id="log", kind="frame_log", params={"path": str(log_path)},
+                              remaps={"in": "skeleton/solved"}))
+    lf.name = name
+    return lf
+
+
+def frame_log_figures(path: str | Path) -> tuple[np.ndarray, int]:
+    """A frame_log CSV -> (latency per message in ms, sequence gaps = messages dropped on the way)."""
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    latency_ms = np.array([float(r["latency_us"]) for r in rows]) / 1000
+    seq = np.array([int(r["seq"]) for r in rows])
+    return latency_ms, int((np.diff(seq) - 1).clip(min=0).sum()) if len(seq) > 1 else 0
