@@ -48,7 +48,10 @@ def _from_wire(value: Any, dtype: np.dtype) -> np.ndarray:
     if isinstance(value, np.ndarray):
         return value if value.dtype == dtype else value.astype(dtype)
     if isinstance(value, (list, tuple)):  # convenient when building messages by hand
-        return np.asarray(value, dtype=dtype)
+        try:
+            return np.asarray(value, dtype=dtype)
+        except (TypeError, ValueError, OverflowError) as e:  # ragged, out of range, not numbers
+            raise ValueError(f"cannot make a {dtype.str} array: {e}") from None
     raise ValueError(f"expected an array, got {type(value).__name__}")
 
 
@@ -67,6 +70,7 @@ def Array(dtype: str | type, shape: tuple[int | None, ...]) -> Any:
             raise ValueError(f"shape {a.shape}, expected {pattern}")
         return a
 
+    validate.array_spec = (dt, shape)  # messages.fastpath inlines the same checks
     return Annotated[
         np.ndarray,
         PlainValidator(validate),

@@ -42,6 +42,16 @@ def main(argv: list[str] | None = None) -> int:
         argv = [line]
     spec = NodeSpec.model_validate_json(argv[0])
     configure_logging(os.environ.get("MOCAP_LOG_LEVEL", "INFO"))
+    profile_dir = os.environ.get("MOCAP_PROFILE_DIR")
+    if profile_dir:  # developers: one cProfile file per node, read with `python -m pstats FILE`
+        import cProfile
+
+        profiler = cProfile.Profile()
+        try:
+            return profiler.runcall(run_node, spec, load_kind(spec.kind))
+        finally:
+            os.makedirs(profile_dir, exist_ok=True)
+            profiler.dump_stats(os.path.join(profile_dir, f"{spec.id.replace('#', '_')}.prof"))
     return run_node(spec, load_kind(spec.kind))
 
 

@@ -32,6 +32,8 @@ from nodes.spec import NodeSpec
 
 HEARTBEAT_PERIOD_S = 1.0
 DIAGNOSTICS = "diagnostics"
+# Plain ints: combining pyzmq's enum flags costs microseconds per call on the hot path.
+_NOBLOCK, _MORE, _POLLIN = int(zmq.NOBLOCK), int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.POLLIN)
 
 
 class NoParams(BaseModel):
@@ -85,20 +87,21 @@ class Node:
 
 
 class _TopicStats:
-    __slots__ = ("count", "window", "drops", "last_seq", "last_frame", "lost_frames")
+    __slots__ = ("count", "drops", "last_seq", "last_frame", "lost_frames", "rate_mark")
 
     def __init__(self):
         self.count = 0
-        self.window = collections.deque()   # receive/publish times over the last second
         self.drops = 0
         self.last_seq: dict[str, int] = {}
         self.last_frame: dict[str, int] = {}
         self.lost_frames = 0                # frames a restarted publisher never sent
+        self.rate_mark = (time.monotonic(), 0)
 
     def rate(self, now: float) -> float:
-        while self.window and self.window[0] < now - 1.0:
-            self.window.popleft()
-        return float(len(self.window))
+        """Messages per second since the last call (once per heartbeat: no per-message bookkeeping)."""
+        then, count = self.rate_mark
+        self.rate_mark = (now, self.count)
+        return (self.count - count) / (now - then) if now > then else 0.0
 
 
 class NodeContext:
@@ -190,27 +193,27 @@ class NodeContext:
         graph-entry time are carried over from the message this one was computed from."""
         if self.pub is None:
             return
-        h = msg.header
-        h.schema_name, h.version = msg.SCHEMA, msg.VERSION
+        # Written straight into the header's __dict__: pydantic's __setattr__ would cost ~10 us a message.
+        h = msg.header.__dict__
+        h["schema_name"], h["version"] = msg.SCHEMA, msg.VERSION
         if source is not None:
             sh = source.header
-            h.frame, h.capture_time_s, h.entry_time_ns = sh.frame, sh.capture_time_s, sh.entry_time_ns
-        elif h.entry_time_ns == 0:
-            h.entry_time_ns = time.time_ns()
+            h["frame"], h["capture_time_s"], h["entry_time_ns"] = sh.frame, sh.capture_time_s, sh.entry_time_ns
+        elif h["entry_time_ns"] == 0:
+            h["entry_time_ns"] = time.time_ns()
         wire = self.wire_topic(topic)
-        self._seq[wire] += 1
-        h.seq, h.publisher = self._seq[wire], self.publisher_id
+        seq = self._seq[wire] = self._seq[wire] + 1
+        h["seq"], h["publisher"] = seq, self.publisher_id
         self.send_raw(wire, encode(msg))
 
     def send_raw(self, wire_topic: str, payload: bytes) -> None:
-        try:
-            self.pub.send_multipart([wire_topic.encode(), payload], zmq.NOBLOCK, copy=False)
+        try:  # two sends rather than send_multipart: a few microseconds less per message
+            self.pub.send(wire_topic.encode(), _MORE)
+            self.pub.send(payload, _NOBLOCK)
         except zmq.Again:  # HWM reached on every peer: keep-last semantics, the frame is dropped
             self.errors["send_dropped"] += 1
             return
-        st = self._pub_stats[wire_topic]
-        st.count += 1
-        st.window.append(time.monotonic())
+        self._pub_stats[wire_topic].count += 1
 
     # -- receiving ---------------------------------------------------------------------------------
     def receive(self, frames: list[bytes]) -> tuple[str, Message] | None:
@@ -231,8 +234,6 @@ class NodeContext:
             return None  # a sibling replica's frame
         st = self._sub_stats[wire]
         st.count += 1
-        now = time.monotonic()
-        st.window.append(now)
         h = msg.header
         last = st.last_seq.get(h.publisher)
         if last is not None and h.seq > last + 1:
@@ -359,12 +360,10 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
                 batch_end = time.monotonic() + 0.02
                 newest: dict[bytes, list] = {}
                 for _ in range(1000):  # bounded batch (count and time): heartbeats and ticks still run
-                    if time.monotonic() > batch_end:
+                    # Asking for EVENTS is far cheaper than the zmq.Again exception of an empty recv.
+                    if not ctx.sub.getsockopt(zmq.EVENTS) & _POLLIN or time.monotonic() > batch_end:
                         break
-                    try:
-                        frames = ctx.sub.recv_multipart(zmq.NOBLOCK)
-                    except zmq.Again:
-                        break
+                    frames = ctx.sub.recv_multipart(_NOBLOCK)
                     if spec.keep_last and len(frames) == 2:
                         if frames[0] in newest:
                             ctx.skipped(frames[0])  # keep-last: an older frame nobody will see
