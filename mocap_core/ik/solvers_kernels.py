@@ -15,9 +15,14 @@ from mocap_core.ik.kernels import (EPS, axis_angle, constrain_bone, constrain_ch
 
 CCD, FABRIK, JACOBIAN_TRANSPOSE, DLS = 0, 1, 2, 3
 DLS_LAMBDA = 1.1  # thesis 3.5.1
-# An iteration that brings the end effector less than 1% closer counts as a stall: two in a row
+# An iteration that brings the end effector less than 1% closer than the best since the last escape
+# counts as a stall: STALL_ITERATIONS in a row
 # trigger the deadlock escape (crawling along a joint limit costs time and gains nothing visible).
 MIN_PROGRESS = 0.01
+STALL_ITERATIONS = 4
+# An escape counts as fruitful when it brings the best distance down by this fraction; crawling
+# closer a millimetre per escape is how a constrained chain used to spend milliseconds on a frame.
+ESCAPE_GAIN = 0.1
 
 
 @njit(cache=True)
@@ -134,7 +139,7 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
     An unreachable target (farther than the chain is long) gets the chain stretched straight at
     it, as in the thesis's code, then limited. When the distance stops shrinking the deadlock
     escape turns the whole chain and the solver goes on; the best pose seen is kept. After
-    ``escape_patience`` escapes in a row that gain less than a millimetre the target is taken as
+    ``escape_patience`` escapes in a row that gain less than ESCAPE_GAIN the target is taken as
     out of reach within the limits, and the best pose is returned."""
     n = R.shape[0]
     total = 0.0
@@ -149,8 +154,9 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
         return 0, vnorm(P[n] - target)
     best = vnorm(P[n] - target)
     bestP, bestR = P.copy(), R.copy()
-    last = best
-    stalls = 0
+    since_gain = 0          # iterations since the best distance since the last escape shrank by MIN_PROGRESS
+    since_best = 0          # ... since the best distance of the whole solve did
+    local = best
     attempt = 0
     fruitless = 0
     best_at_escape = best
@@ -159,28 +165,35 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
         _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
         it += 1
         dist = vnorm(P[n] - target)
+        # Progress is judged against the best distance since the last escape, not the last step's:
+        # a chain that oscillates against its limits (down 5 %, up 5 %, ...) is as stuck as one
+        # that does not move, and used to crawl through all its iterations (1-4 ms a frame).
+        if dist < local * (1.0 - MIN_PROGRESS):
+            since_gain = 0
+            local = dist
+        else:
+            since_gain += 1
+        since_best = 0 if dist < best * (1.0 - MIN_PROGRESS) else since_best + 1
         if dist < best:
             best = dist
             bestP[:] = P
             bestR[:] = R
-        if dist > last * (1.0 - MIN_PROGRESS) and dist > stop_m:
-            stalls += 1
-            if stalls >= 2:
-                stalls = 0
-                P[:] = bestP
-                R[:] = bestR
-                fruitless = fruitless + 1 if best > best_at_escape - 1e-3 else 0
-                best_at_escape = best
-                if fruitless > escape_patience:
-                    break
-                if not escape_rotation(P, R, ref0, attempt, escape_step_deg, escape_max_deg):
-                    break
-                attempt += 1
-                if constrained:
-                    constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
-        else:
-            stalls = 0
-        last = dist
+        # stuck, or an escape that has not beaten the best pose within a few iterations
+        if (since_gain >= STALL_ITERATIONS or since_best >= 2 * STALL_ITERATIONS) and best > stop_m:
+            since_gain = 0
+            since_best = 0
+            P[:] = bestP
+            R[:] = bestR
+            fruitless = fruitless + 1 if best > best_at_escape * (1.0 - ESCAPE_GAIN) else 0
+            best_at_escape = best
+            if fruitless > escape_patience:
+                break
+            if not escape_rotation(P, R, ref0, attempt, escape_step_deg, escape_max_deg):
+                break
+            attempt += 1
+            if constrained:
+                constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+            local = vnorm(P[n] - target)  # progress is judged afresh from the turned pose
     P[:] = bestP
     R[:] = bestR
     return it, best
