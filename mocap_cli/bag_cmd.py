@@ -48,6 +48,9 @@ def add_parser(sub) -> None:
                    help="send the next frame only after the graph published the last on TOPIC "
                         "(default skeleton/solved)")
     p.add_argument("--restamp", action="store_true", help="give messages a fresh graph-entry time")
+    p.add_argument("--spin-ms", type=float, default=1.0, metavar="MS",
+                   help="busy-wait the last MS before each timed message for accurate spacing (default 1; 0 = "
+                        "sleep only, which leaves more CPU to the graph)")
     p.add_argument("--record", metavar="OUT.mcap", help="also record the graph's output topics (see --record-topics)")
     p.add_argument("--record-topics", nargs="+", default=["skeleton/solved"])
     p.set_defaults(func=cmd_play)
@@ -122,7 +125,8 @@ def cmd_play(args) -> int:
 
     info = bag_info(args.file)  # fails clearly on a missing, corrupt or foreign file
     player = {"path": str(Path(args.file).resolve()), "rate": args.rate, "loop": args.loop, "topics": args.topics,
-              "start_offset_s": args.start_offset, "lockstep_topic": args.lockstep, "restamp": args.restamp}
+              "start_offset_s": args.start_offset, "lockstep_topic": args.lockstep, "restamp": args.restamp,
+              "spin_ms": args.spin_ms}
     if args.launch:
         lf = load_launch_file(args.launch, args.set or [])
         sources = [n for n in lf.nodes if n.kind in SOURCE_KINDS]

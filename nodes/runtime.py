@@ -16,6 +16,7 @@ writes (``publishes``), and handlers. The runtime owns the sockets and the loop:
 from __future__ import annotations
 
 import collections
+import gc
 import logging
 import os
 import signal
@@ -325,6 +326,10 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
     code = 0
     try:
         node.setup()
+        # What setup built (a bag's messages, kernels, tables) lives as long as the node: move it out
+        # of the collector's sight, so a full collection cannot stall the loop for milliseconds.
+        gc.collect()
+        gc.freeze()
         while not stopping:
             now = time.monotonic()
             if not ready_sent and control is not None:
