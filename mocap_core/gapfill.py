@@ -104,47 +104,73 @@ class LimbFiller:
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 
     def _swivel_fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
+        """Fill each run of missing joints between two located ones without iterating.
+
+        The first missing joint (an elbow, a knee) lies on a circle fixed by two lengths: its bone
+        from the located joint before the run, and the distance from it to the located joint after
+        the run, which the run's last shape keeps (for a lone joint that is simply its second bone;
+        for a knee and an ankle lost together it is knee to toe with the ankle angle held). Where on
+        the circle (the swivel angle) is carried over from the last frame in the frame of the located
+        joint after the run, else of the limb's parent (pelvis or chest): never in world space. The
+        rest of the run keeps its last shape in the plane of the two "bones"."""
         idx, n = self.joints, len(self.joints)
         parent_now, parent_prev = frames[self.parent_of_root], self.prev_parent_frame
         if not (np.isfinite(parent_now).all() and np.isfinite(parent_prev).all()):
             return 0
         filled = 0
-        for k in range(1, n - 1):
-            if not (status[idx[k]] == Status.MISSING and status[idx[k - 1]] != Status.MISSING
-                    and status[idx[k + 1]] != Status.MISSING):
+        k = 1
+        while k < n - 1:
+            if not (status[idx[k]] == Status.MISSING and status[idx[k - 1]] != Status.MISSING):
+                k += 1
                 continue
-            pp, pm, pt = self.prev_pos[k - 1], self.prev_pos[k], self.prev_pos[k + 1]
-            a, b = np.linalg.norm(pm - pp), np.linalg.norm(pt - pm)
-            root, target = positions[idx[k - 1]], positions[idx[k + 1]]
-            d = target - root
-            dist = np.linalg.norm(d)
-            if not (dist > 1e-9 and a > 0 and b > 0):
-                continue
-            axis = d / dist
-            along = np.clip((a * a - b * b + dist * dist) / (2 * dist), -a, a)
-            radius = np.sqrt(max(a * a - along * along, 0.0))
-            # the previous bend direction, carried to now in the frame of the located joint after the
-            # gap (the wrist for an elbow: it turns with the forearm), else in the limb parent's frame
-            d_prev = pt - pp
-            u_prev = (pm - pp) - ((pm - pp) @ d_prev) / (d_prev @ d_prev) * d_prev
-            ref_now, ref_prev = frames[idx[k + 1]], self.prev_frames[k + 1]
-            if not (np.isfinite(ref_now).all() and np.isfinite(ref_prev).all()):
-                ref_now, ref_prev = parent_now, parent_prev
-            u = ref_now @ (ref_prev.T @ u_prev)
-            u = u - (u @ axis) * axis
-            nu = np.linalg.norm(u)
-            if not nu > 1e-9:
-                continue
-            positions[idx[k]] = root + along * axis + radius * u / nu
-            status[idx[k]] = Status.ESTIMATED
-            filled += 1
-            # bone frames of the two bones now known
-            for j, child in ((k - 1, k), (k, k + 1)):
-                y = positions[idx[child]] - positions[idx[j]]
-                prev = frames[idx[j]] if np.isfinite(frames[idx[j]]).all() else parent_now @ parent_prev.T @ \
-                    self.prev_frames[j]
-                frames[idx[j]] = _frame_along(y, prev)
+            b = k
+            while b < n and status[idx[b]] == Status.MISSING:
+                b += 1
+            if b == n:  # no located joint after the run: Algorithm 1's carry handles it
+                break
+            filled += self._fill_run(positions, frames, status, k - 1, k, b, parent_now, parent_prev)
+            k = b + 1
         return filled
+
+    def _fill_run(self, positions, frames, status, a: int, k: int, b: int, parent_now, parent_prev) -> int:
+        """Joints k..b-1 missing, a and b located (limb-chain indices)."""
+        idx, prev = self.joints, self.prev_pos
+        pa, pk, pb = prev[a], prev[k], prev[b]
+        upper, lower = np.linalg.norm(pk - pa), np.linalg.norm(pb - pk)
+        root, target = positions[idx[a]], positions[idx[b]]
+        d = target - root
+        dist = np.linalg.norm(d)
+        if not (dist > 1e-9 and upper > 0 and lower > 0):
+            return 0
+        axis = d / dist
+        along = np.clip((upper * upper - lower * lower + dist * dist) / (2 * dist), -upper, upper)
+        radius = np.sqrt(max(upper * upper - along * along, 0.0))
+        # the previous bend direction, carried to now in the frame of the located joint after the run
+        # (the wrist for an elbow: it turns with the forearm), else in the limb parent's frame
+        d_prev = pb - pa
+        u_prev = (pk - pa) - ((pk - pa) @ d_prev) / (d_prev @ d_prev) * d_prev
+        ref_now, ref_prev = frames[idx[b]], self.prev_frames[b]
+        if not (np.isfinite(ref_now).all() and np.isfinite(ref_prev).all()):
+            ref_now, ref_prev = parent_now, parent_prev
+        u = ref_now @ (ref_prev.T @ u_prev)
+        u = u - (u @ axis) * axis
+        nu = np.linalg.norm(u)
+        if not nu > 1e-9:
+            return 0
+        knee = root + along * axis + radius * u / nu
+        positions[idx[k]] = knee
+        # the rest of the run: its last shape, turned with the plane of (a, k, b)
+        turn = _plane_frame(knee - root, target - knee) @ _plane_frame(pk - pa, pb - pk).T
+        for j in range(k + 1, b):
+            positions[idx[j]] = knee + turn @ (prev[j] - pk)
+        for j in range(k, b):
+            frames[idx[j]] = turn @ self.prev_frames[j]
+        if not np.isfinite(frames[idx[b]]).all():
+            frames[idx[b]] = turn @ self.prev_frames[b]
+        like = frames[idx[a]] if np.isfinite(frames[idx[a]]).all() else parent_now @ parent_prev.T @ self.prev_frames[a]
+        frames[idx[a]] = _frame_along(knee - root, like)
+        status[idx[k:b]] = Status.ESTIMATED
+        return b - k
 
     def _blend_reacquired(self, positions: np.ndarray, status: np.ndarray) -> None:
         idx = self.joints
@@ -162,6 +188,18 @@ class LimbFiller:
                 positions[idx] += self.blend_offset
         self.last_out = positions[idx].copy()
         self.last_status = now.copy()
+
+
+def _plane_frame(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Orthonormal frame (columns) with x along ``second`` and y in the plane of the two bones."""
+    x = second / np.linalg.norm(second)
+    y = first - (first @ x) * x
+    ny = np.linalg.norm(y)
+    if not ny > 1e-9:  # a straight limb: any perpendicular will do
+        y = np.cross(x, [0.0, 0.0, 1.0] if abs(x[2]) < 0.9 else [1.0, 0.0, 0.0])
+        ny = np.linalg.norm(y)
+    y = y / ny
+    return np.column_stack([x, y, np.cross(x, y)])
 
 
 def _frame_along(y: np.ndarray, like: np.ndarray) -> np.ndarray:
