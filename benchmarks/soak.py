@@ -26,14 +26,17 @@ from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
 
 
-def rss_mb(graph: str) -> dict[str, float]:
+def usage(graph: str) -> dict[str, tuple[float, float]]:
+    """Per node: (RSS in MB, CPU seconds used so far)."""
     data = json.loads(registry_path(graph).read_text())
     out = {}
     for n in data["nodes"]:
         try:
-            out[n["id"]] = psutil.Process(n["pid"]).memory_info().rss / 2**20
+            p = psutil.Process(n["pid"])
+            cpu = p.cpu_times()
+            out[n["id"]] = (p.memory_info().rss / 2**20, cpu.user + cpu.system)
         except (psutil.Error, TypeError):
-            out[n["id"]] = float("nan")
+            out[n["id"]] = (float("nan"), float("nan"))
     return out
 
 
@@ -50,9 +53,9 @@ def main():
 
     def sample():
         time.sleep(15)
-        samples["start"] = rss_mb("soak")
+        samples["start"] = usage("soak"), time.monotonic()
         time.sleep(max(0, seconds - 30))
-        samples["end"] = rss_mb("soak")
+        samples["end"] = usage("soak"), time.monotonic()
 
     threading.Thread(target=sample, daemon=True).start()
     try:
@@ -63,9 +66,13 @@ def main():
     lat, gaps = frame_log_figures(out)
     print(f"{len(lat)} skeletons in {seconds:.0f} s ({len(lat) / seconds:.0f} Hz; QTM at {args.rate:.0f} Hz); "
           f"sequence gaps at the sink: {gaps}")
-    print(f"{'node':<12} {'RSS start MB':>13} {'RSS end MB':>11}")
-    for node in samples.get("start", {}):
-        print(f"{node:<12} {samples['start'][node]:>13.1f} {samples.get('end', {}).get(node, float('nan')):>11.1f}")
+    if "end" not in samples:
+        return
+    (start, t0), (end, t1) = samples["start"], samples["end"]
+    print(f"{'node':<12} {'RSS start MB':>13} {'RSS end MB':>11} {'CPU %':>6}  (of one core, between the two samples)")
+    for node, (rss0, cpu0) in start.items():
+        rss1, cpu1 = end.get(node, (float("nan"), float("nan")))
+        print(f"{node:<12} {rss0:>13.1f} {rss1:>11.1f} {100 * (cpu1 - cpu0) / (t1 - t0):>6.0f}")
 
 
 if __name__ == "__main__":
