@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden results results-blend
+.PHONY: demo test setup bench clean golden results results-blend results-swivel
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -53,3 +53,8 @@ results-blend: $(STAMP)
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --solvers ccd --constraints on --mode markers \
 		--reacquire-step 0.01 --report docs/results/knee_ankle_dance_blend
+
+results-swivel: $(STAMP)
+	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
+		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
+		--swivel --reacquire-step 0.01 --report docs/results/knee_ankle_dance_swivel
