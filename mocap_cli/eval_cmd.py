@@ -43,7 +43,8 @@ def add_parser(sub) -> None:
                                     "joint), fill them with each solver and compare.")
     g.add_argument("--take", default=DEFAULT_TAKE, help="recording (default: the BTK sprint start)")
     g.add_argument("--profile", default="btk_sprint")
-    g.add_argument("--remove", default="elbow_l", help="joint(s) to hide, comma-separated (e.g. knee_l,ankle_l)")
+    g.add_argument("--remove", default="elbow_l", help="joint(s) to hide, comma-separated (e.g. knee_l,ankle_l; "
+                   "pelvis hides every hip marker and reports the pelvis, spine0 and both hips)")
     g.add_argument("--from", dest="start_s", type=float, default=1.0, help="gap start, seconds (default 1)")
     g.add_argument("--to", dest="stop_s", type=float, help="gap end, seconds (default: the end of the take)")
     g.add_argument("--solvers", default="all", help="comma-separated, or all")
@@ -55,6 +56,9 @@ def add_parser(sub) -> None:
     g.add_argument("--swivel", action="store_true",
                    help="beyond the thesis: a single missing joint from its bone lengths and the swivel angle "
                         "carried in the parent's frame")
+    g.add_argument("--hips-lost", choices=["hold", "fit", "missing"], default="hold",
+                   help="every hip marker lost (--remove pelvis): hold the last ones (the thesis), or, beyond "
+                        "the thesis, fit them to the trunk and knee markers")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
                    help="beyond the thesis: close the gap to returning markers by at most M metres a frame "
                         "(0 = the thesis's method: jump)")
@@ -130,7 +134,8 @@ def run_gaps(args) -> int:
     combos = [(m, c, s) for m in modes for c in cons for s in solvers]
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
-                            fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel}))
+                            fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel},
+                            hips_lost=args.hips_lost))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []

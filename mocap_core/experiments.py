@@ -93,10 +93,16 @@ JOINT_LANDMARKS = {
 }
 
 
+# Joints that go with another's markers: the hip markers give the pelvis, spine0 and both hip centres.
+SEGMENT_OF = {"pelvis": ("pelvis", "spine0", "hip_l", "hip_r")}
+
+
 def landmarks_of(joint: str) -> list[str]:
+    if joint == "pelvis":  # every hip marker
+        return ["SACR", "L_IAS", "R_IAS"]
     base, _, side = joint.rpartition("_")
     if base not in JOINT_LANDMARKS or side not in ("l", "r"):
-        raise ValueError(f"cannot remove {joint!r} by markers (joints: "
+        raise ValueError(f"cannot remove {joint!r} by markers (joints: pelvis, "
                          f"{', '.join(f'{j}_l/_r' for j in JOINT_LANDMARKS)})")
     return [f"{side.upper()}_{name}" for name in JOINT_LANDMARKS[base]]
 
@@ -123,19 +129,21 @@ class GapRun:
 
 def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, joints: list[str], start: int,
             stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
-            fill_options: dict | None = None) -> GapRun:
+            fill_options: dict | None = None, hips_lost: str = "hold") -> GapRun:
     """Hide ``joints`` in frames [start, stop) and fill them; compare with the complete take."""
     from mocap_core.hip_interpolation import HipInterpolator
     from mocap_core.localization import Localizer
     from mocap_core.profiles import LANDMARK_INDEX
 
+    hidden = joints
+    joints = [k for j in joints for k in SEGMENT_OF.get(j, (j,))]  # the pelvis's markers take its segment
     jidx = [INDEX[j] for j in joints]
     lm = landmarks.copy()
     if mode == "markers":
-        for j in joints:
+        for j in hidden:
             for name in landmarks_of(j):
                 lm[start:stop, LANDMARK_INDEX[name]] = np.nan
-    lm, _ = HipInterpolator().fill_landmarks(lm)
+    lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
     loc = Localizer(profile.body).localize(lm)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if mode == "joint":

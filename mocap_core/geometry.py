@@ -46,3 +46,14 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         flip = 2 * perp[..., :, None] * perp[..., None, :] - np.eye(3)
         r = np.where(opposite[..., None, None], flip, r)
     return r
+
+
+def rigid_fit(before: np.ndarray, after: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation and translation (R, t) minimising sum w |R before + t - after|^2 (weighted Kabsch)."""
+    w = weights / weights.sum()
+    cb, ca = w @ before, w @ after
+    h = ((before - cb) * w[:, None]).T @ (after - ca)
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return rot, ca - rot @ cb

@@ -11,7 +11,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
-from mocap_core.hip_interpolation import HIP_INDEX, HipInterpolator
+from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, HipInterpolator, WhenLost
 from mocap_core.profiles import LANDMARKS, load_profile
 from nodes.runtime import Node
 
@@ -20,6 +20,8 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     profile: str = Field(description="marker-set profile name (profiles/) or YAML path")
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
+    when_lost: WhenLost = Field("hold", description="every hip marker lost: hold the last ones (the thesis), fit "
+                                "them to the trunk and knee markers (beyond the thesis), or leave the pelvis missing")
 
 
 class HipInterpolation(Node):
@@ -30,7 +32,7 @@ class HipInterpolation(Node):
 
     def setup(self) -> None:
         self.profile = load_profile(self.params.profile)
-        self.hips = HipInterpolator(max_step_m=self.params.max_step_m)
+        self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
         self.labels: list[str] | None = None
         self.map = None
 
@@ -40,7 +42,7 @@ class HipInterpolation(Node):
             self.labels = msg.labels
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
         lm = self.map.apply(msg.positions)
-        hips, interpolated = self.hips.fill(lm[HIP_INDEX])
+        hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED

@@ -117,3 +117,47 @@ def test_swivel_option_beats_the_thesis_method_on_a_walk(walk):
             assert upper.std() < 1e-6
     assert err[True].mean() < 0.025 and err[True].max() < 0.06, (err[True].mean(), err[True].max())
     assert err[True].mean() < err[False].mean()
+
+
+def test_lost_pelvis_follows_the_body_on_a_walk():
+    """Beyond the thesis: every hip marker hidden for 1.5 s of walking. Holding them (the thesis) leaves
+    the pelvis behind as the subject walks on; fitting them to the trunk and knees keeps it close."""
+    rec = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
+    prof = load_profile("qualisys_sports")
+    raw = prof.resolve(rec.labels).apply(rec.positions)
+    truth = Localizer(prof.body).localize(HipInterpolator().fill_landmarks(raw)[0]).positions
+    hips = [LANDMARK_INDEX[n] for n in ("SACR", "L_IAS", "R_IAS")]
+    hidden = raw.copy()
+    hidden[50:200, hips] = np.nan
+    err = {}
+    for when_lost in ("hold", "fit"):
+        lm, flags = HipInterpolator(when_lost=when_lost).fill_landmarks(hidden)
+        assert flags[50:200].all()
+        pos = Localizer(prof.body).localize(lm).positions
+        seg = [INDEX[j] for j in ("pelvis", "hip_l", "hip_r")]
+        err[when_lost] = np.linalg.norm(pos[50:200][:, seg] - truth[50:200][:, seg], axis=-1)
+    assert err["hold"].mean() > 0.3                     # the subject walked on without it
+    assert err["fit"].mean() < 0.03 and err["fit"].max() < 0.06, (err["fit"].mean(), err["fit"].max())
+
+
+def test_swivel_fills_a_knee_and_ankle_lost_together(walk):
+    """Beyond the thesis: a run of missing joints (knee and ankle) without iterating; the ankle angle is
+    held, so the figures are modest, but lengths hold and the ankle lands far nearer than the thesis's."""
+    lm, prof = walk
+    truth, _, _ = localized(lm, prof)
+    hidden = lm.copy()
+    hidden[60:160, [LANDMARK_INDEX[n] for n in ("L_FLE", "L_FME", "L_TTC", "L_FAL", "L_TAM")]] = np.nan
+    err = {}
+    for swivel in (False, True):
+        pos, frames, status = localized(hidden, prof)
+        filler = GapFiller("ccd", swivel=swivel)
+        for f in range(len(pos)):
+            filler.fill(pos[f], frames[f], status[f])
+        k, a = INDEX["knee_l"], INDEX["ankle_l"]
+        assert (status[60:160, [k, a]] == Status.ESTIMATED).all()
+        err[swivel] = np.linalg.norm(pos[60:160][:, [k, a]] - truth[60:160][:, [k, a]], axis=-1).mean(axis=0)
+        if swivel:
+            thigh = np.linalg.norm(pos[60:160, k] - pos[60:160, INDEX["hip_l"]], axis=1)
+            assert thigh.std() < 1e-6
+    assert err[True][1] < err[False][1], err
+    assert err[True].max() < 0.08, err

@@ -79,3 +79,40 @@ def test_last_known_updates_only_on_complete_frames():
     frame[2] = NAN
     h.fill(frame)
     np.testing.assert_array_equal(h.last_known, TRIANGLE)
+
+
+# -- beyond the thesis: every hip marker lost, the triangle carried by the trunk and knee markers ---------
+ANCHORS = np.array([[-0.12, 0.0, 1.45], [-0.10, 0.0, 1.75], [0.12, 0.0, 1.50], [0.05, 0.0, 1.85],
+                    [0.0, 0.18, 1.60], [0.0, -0.18, 1.60], [0.02, 0.10, 0.55], [0.02, -0.10, 0.55]])
+
+
+def test_all_lost_fit_follows_a_rigid_move_of_the_body_exactly():
+    h = HipInterpolator(max_step_m=10.0, when_lost="fit")
+    h.fill(TRIANGLE, ANCHORS)
+    rot, shift = rotz(30), np.array([0.3, -0.2, 0.05])
+    out, interp = h.fill(np.full((3, 3), np.nan), ANCHORS @ rot.T + shift)
+    np.testing.assert_allclose(out, TRIANGLE @ rot.T + shift, atol=1e-9)
+    assert interp.all()
+
+
+def test_all_lost_fit_with_some_anchors_missing_and_the_knees_weighing_less():
+    h = HipInterpolator(max_step_m=10.0, when_lost="fit")
+    h.fill(TRIANGLE, ANCHORS)
+    now = ANCHORS + [0.2, 0.0, 0.0]
+    now[[1, 3]] = np.nan            # two trunk markers lost too
+    now[6] += [0.3, 0.0, 0.0]       # a knee swung forward: it must pull the pelvis only a little
+    out, _ = h.fill(np.full((3, 3), np.nan), now)
+    off = np.linalg.norm(out - (TRIANGLE + [0.2, 0, 0]), axis=1).max()
+    assert off < 0.3 / 3, off       # under a third of the knee's swing (a trunk-only fit would be exact)
+
+
+def test_all_lost_fit_falls_back_to_holding_without_enough_anchors():
+    h = HipInterpolator(max_step_m=10.0, when_lost="fit")
+    h.fill(TRIANGLE, ANCHORS)
+    few = np.full_like(ANCHORS, np.nan)
+    few[:2] = ANCHORS[:2] + 0.3     # two points fix no rotation
+    out, _ = h.fill(np.full((3, 3), np.nan), few)
+    np.testing.assert_array_equal(out, TRIANGLE)
+    missing = HipInterpolator(when_lost="missing")
+    missing.fill(TRIANGLE, ANCHORS)
+    assert np.isnan(missing.fill(np.full((3, 3), np.nan), ANCHORS)[0]).all()
