@@ -56,6 +56,8 @@ def add_parser(sub) -> None:
     g.add_argument("--swivel", action="store_true",
                    help="beyond the thesis: a single missing joint from its bone lengths and the swivel angle "
                         "carried in the parent's frame")
+    g.add_argument("--segment-carry", action="store_true",
+                   help="beyond the thesis: a lost ankle moves with its still-tracked foot (heel and toe markers)")
     g.add_argument("--hips-lost", choices=["hold", "fit", "missing"], default="hold",
                    help="every hip marker lost (--remove pelvis): hold the last ones (the thesis), or, beyond "
                         "the thesis, fit them to the trunk and knee markers")
@@ -134,7 +136,8 @@ def run_gaps(args) -> int:
     combos = [(m, c, s) for m in modes for c in cons for s in solvers]
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
-                            fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel},
+                            fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
+                                          "segment_carry": args.segment_carry},
                             hips_lost=args.hips_lost))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)

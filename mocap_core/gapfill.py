@@ -25,6 +25,7 @@ import numpy as np
 
 from numba import njit
 
+from mocap_core.geometry import rotation_between
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
@@ -42,6 +43,9 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
     "right_leg": LIMBS["right_leg"],
 }
 LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
+BEND_MIN = 0.1  # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
+# Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
+CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 
 
 @dataclass
@@ -57,7 +61,8 @@ class LimbFiller:
     """Fills the gaps of one limb frame after frame. Owns the limb's previous solved chain."""
 
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False):
+                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
+                 segment_carry: bool = False):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -80,6 +85,13 @@ class LimbFiller:
         # lengths; where on it (the swivel angle) is carried over from the last frame in the frame of
         # the limb's parent (chest or pelvis), not in world space. No iteration, no drift.
         self.swivel = swivel
+        self.bend: dict[tuple, np.ndarray] = {}  # last well-defined bend direction per run, in its frame
+        # Beyond the thesis: a lost ankle moves with its foot while the foot is still tracked (heel
+        # and toe markers): ankle, foot and toe are one rigid body, so the ankle keeps its last
+        # offset from the foot, turned by the least rotation that carries the foot's last heel-to-toe
+        # axis onto the current one. The knee is then a lone missing joint (swivel or IK).
+        self.carried = [(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb]) if name in CARRIED_BY_SEGMENT] \
+            if segment_carry else []
         self.blend_offset = np.zeros((n, 3))
         self.last_out: np.ndarray | None = None
         self.last_status: np.ndarray | None = None
@@ -91,6 +103,8 @@ class LimbFiller:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton)."""
         t0 = time.perf_counter()
         out = np.zeros(4)
+        if self.carried and self.has_prev[0]:
+            out[0] += self._segment_carry(positions, frames, status)
         if self.swivel and self.has_prev[0]:
             out[0] += self._swivel_fill(positions, frames, status)
         p = self.params
@@ -102,6 +116,21 @@ class LimbFiller:
             self._blend_reacquired(positions, status)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
+
+    def _segment_carry(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
+        idx, prev, filled = self.joints, self.prev_pos, 0
+        for j, c, g in self.carried:
+            if status[idx[j]] != Status.MISSING or Status.MISSING in (status[idx[c]], status[idx[g]]):
+                continue
+            axis_prev, axis_now = prev[g] - prev[c], positions[idx[g]] - positions[idx[c]]
+            if not (np.isfinite(axis_now).all() and np.linalg.norm(axis_now) > 1e-6):
+                continue
+            turn = rotation_between(axis_prev, axis_now)
+            positions[idx[j]] = positions[idx[c]] + turn @ (prev[j] - prev[c])
+            frames[idx[j]] = turn @ self.prev_frames[j]
+            status[idx[j]] = Status.ESTIMATED
+            filled += 1
+        return filled
 
     def _swivel_fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
         """Fill each run of missing joints between two located ones without iterating.
@@ -150,9 +179,20 @@ class LimbFiller:
         d_prev = pb - pa
         u_prev = (pk - pa) - ((pk - pa) @ d_prev) / (d_prev @ d_prev) * d_prev
         ref_now, ref_prev = frames[idx[b]], self.prev_frames[b]
+        key = (a, k, b, True)
         if not (np.isfinite(ref_now).all() and np.isfinite(ref_prev).all()):
-            ref_now, ref_prev = parent_now, parent_prev
-        u = ref_now @ (ref_prev.T @ u_prev)
+            ref_now, ref_prev, key = parent_now, parent_prev, (a, k, b, False)
+        # A nearly straight limb (a knee at mid-stance) has no bend direction worth the name: its sign
+        # is noise. Keep the last well-defined one (bent over BEND_MIN of the bone) in the frame.
+        size = np.linalg.norm(u_prev)
+        if size > BEND_MIN * upper:
+            self.bend[key] = ref_prev.T @ (u_prev / size)
+        local = self.bend.get(key)
+        if local is None:
+            if not size > 1e-9:
+                return 0
+            local = ref_prev.T @ (u_prev / size)
+        u = ref_now @ local
         u = u - (u @ axis) * axis
         nu = np.linalg.norm(u)
         if not nu > 1e-9:
@@ -204,8 +244,6 @@ def _plane_frame(first: np.ndarray, second: np.ndarray) -> np.ndarray:
 
 def _frame_along(y: np.ndarray, like: np.ndarray) -> np.ndarray:
     """A bone frame whose y runs along ``y``, turned from ``like`` by the shortest arc."""
-    from mocap_core.geometry import rotation_between
-
     return rotation_between(like[:, 1], y) @ like
 
 
@@ -289,9 +327,10 @@ class GapFiller:
     """All five limbs in graph order (torso first), for offline use; the nodes use LimbFiller."""
 
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False):
+                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
+                 segment_carry: bool = False):
         constraints = constraints if constraints is not None else load_constraints()
-        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel)
+        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel, segment_carry)
                       for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status) -> dict[str, FillStats]:

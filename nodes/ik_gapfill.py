@@ -31,6 +31,8 @@ class Params(BaseModel):
     stop_distance_m: float = Field(0.01, gt=0)
     swivel: bool = Field(False, description="beyond the thesis: one missing joint from bone lengths and the "
                          "swivel angle carried in the parent's frame")
+    segment_carry: bool = Field(False, description="beyond the thesis: a lost ankle moves with its still-tracked "
+                                "foot (heel and toe markers)")
     reacquire_step_m: float = Field(0.0, ge=0, description="beyond the thesis: largest per-frame move while "
                                     "blending to returning markers; 0 = jump, as the thesis did")
 
@@ -56,7 +58,8 @@ class IkGapfill(Node):
         warm_up()
         p = self.params
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
-                                 load_constraints(p.constraints_file), p.reacquire_step_m, p.swivel)
+                                 load_constraints(p.constraints_file), p.reacquire_step_m, p.swivel,
+                                 p.segment_carry)
         self.names = list(LIMB_CHAINS[p.limb])
 
     def on_message(self, topic, msg: SkeletonFrame) -> None:
