@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden results results-blend results-swivel
+.PHONY: demo test setup bench clean golden results results-blend results-beyond
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -54,7 +54,13 @@ results-blend: $(STAMP)
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --solvers ccd --constraints on --mode markers \
 		--reacquire-step 0.01 --report docs/results/knee_ankle_dance_blend
 
-results-swivel: $(STAMP)
+results-beyond: $(STAMP)
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
-		--swivel --reacquire-step 0.01 --report docs/results/knee_ankle_dance_swivel
+		--swivel --segment-carry --reacquire-step 0.01 --report docs/results/knee_ankle_dance_beyond
+	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
+		--remove knee_l,ankle_l --from 0.5 --to 2.0 --constraints on --mode markers \
+		--swivel --segment-carry --reacquire-step 0.01 --report docs/results/knee_ankle_walk_beyond
+	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
+		--remove pelvis --from 0.5 --to 2.0 --solvers ccd --constraints on --mode markers --hips-lost fit \
+		--report docs/results/pelvis_walk_fit
