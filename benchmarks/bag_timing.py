@@ -24,6 +24,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=20)
     ap.add_argument("--rate-hz", type=float, default=300)
+    ap.add_argument("--spin-ms", type=float, default=1.0, help="the player's busy-wait before each message")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     src, out = tmp / "src.mcap", tmp / "replayed.mcap"
@@ -37,7 +38,7 @@ def main():
         bag.write("markers/raw", encode(m), t0 + int(t * 1e9), int(t * 1e9))
     bag.close()
     subprocess.run([sys.executable, "-m", "mocap_cli.main", "--log-level", "WARNING", "bag", "play", str(src),
-                    "--record", str(out), "--record-topics", "markers/raw"], cwd=REPO, check=True)
+                    "--record", str(out), "--record-topics", "markers/raw", "--spin-ms", str(args.spin_ms)], cwd=REPO, check=True)
     sent = np.array([m.log_time_ns for m in read_bag(out)], dtype=np.float64) / 1e6
     want = np.arange(len(sent)) * 1000 / args.rate_hz
     err = np.abs(np.diff(sent) - np.diff(want))
