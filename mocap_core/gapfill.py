@@ -43,6 +43,8 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
     "right_leg": LIMBS["right_leg"],
 }
 LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
+MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
+STABLE_STD = 0.08   # ... and the spread of its steadiest component that still counts as steady
 BEND_MIN = 0.1  # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
 CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
@@ -86,6 +88,8 @@ class LimbFiller:
         # the limb's parent (chest or pelvis), not in world space. No iteration, no drift.
         self.swivel = swivel
         self.bend: dict[tuple, np.ndarray] = {}  # last well-defined bend direction per run, in its frame
+        # each bone's direction in the frame of the joint it ends at, learned while both are located
+        self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
         # Beyond the thesis: a lost ankle moves with its foot while the foot is still tracked (heel
         # and toe markers): ankle, foot and toe are one rigid body, so the ankle keeps its last
         # offset from the foot, turned by the least rotation that carries the foot's last heel-to-toe
@@ -105,8 +109,10 @@ class LimbFiller:
         out = np.zeros(4)
         if self.carried and self.has_prev[0]:
             out[0] += self._segment_carry(positions, frames, status)
-        if self.swivel and self.has_prev[0]:
-            out[0] += self._swivel_fill(positions, frames, status)
+        if self.swivel:
+            self._learn_directions(positions, frames, status)
+            if self.has_prev[0]:
+                out[0] += self._swivel_fill(positions, frames, status)
         p = self.params
         _fill_limb(positions, frames, status, self.joints, self.parent_of_root, self.limb.endswith("arm"),
                    self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
@@ -116,6 +122,29 @@ class LimbFiller:
             self._blend_reacquired(positions, status)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
+
+    def _learn_directions(self, positions, frames, status) -> None:
+        idx = self.joints
+        for k in range(1, len(idx) - 1):
+            if status[idx[k]] != Status.LOCATED or status[idx[k + 1]] != Status.LOCATED:
+                continue
+            bone, frame = positions[idx[k + 1]] - positions[idx[k]], frames[idx[k + 1]]
+            size = np.linalg.norm(bone)
+            if size > 1e-6 and np.isfinite(frame).all():
+                local = frame.T @ (bone / size)
+                self.dir_sum[k] += local
+                self.dir_sq[k] += local * local
+                self.dir_n[k] += 1
+
+    def _stable_axis(self, k: int) -> tuple[int, float] | None:
+        """The axis of joint k+1's frame along which bone k's direction hardly varies (the forearm
+        against the radio-ulnar line of the wrist), and its mean component; None if there is none."""
+        if self.dir_n[k] < MIN_SAMPLES:
+            return None
+        mean = self.dir_sum[k] / self.dir_n[k]
+        std = np.sqrt(np.maximum(self.dir_sq[k] / self.dir_n[k] - mean * mean, 0.0))
+        axis = int(np.argmin(std))
+        return (axis, float(mean[axis])) if std[axis] < STABLE_STD else None
 
     def _segment_carry(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
         idx, prev, filled = self.joints, self.prev_pos, 0
@@ -197,7 +226,13 @@ class LimbFiller:
         nu = np.linalg.norm(u)
         if not nu > 1e-9:
             return 0
-        knee = root + along * axis + radius * u / nu
+        u = u / nu
+        # only a measured frame, not one carried over by segment_carry
+        stable = self._stable_axis(k) if b == k + 1 and key[3] and status[idx[b]] == Status.LOCATED else None
+        if stable is not None:  # the next joint's frame tells where on the circle: turn u there
+            u = _on_circle_towards(u, axis, radius, target - (root + along * axis), lower,
+                                   ref_now[:, stable[0]], stable[1])
+        knee = root + along * axis + radius * u
         positions[idx[k]] = knee
         # the rest of the run: its last shape, turned with the plane of (a, k, b)
         turn = _plane_frame(knee - root, target - knee) @ _plane_frame(pk - pa, pb - pk).T
@@ -228,6 +263,20 @@ class LimbFiller:
                 positions[idx] += self.blend_offset
         self.last_out = positions[idx].copy()
         self.last_status = now.copy()
+
+
+def _on_circle_towards(u, axis, radius, to_target, lower, n, c):
+    """The direction on the swivel circle (from its centre) nearest to ``u`` at which the bone from
+    the circle to the target has the component ``c`` along ``n``, or ``u`` when none is near."""
+    e2 = np.cross(axis, u)
+    a, b = radius * (n @ u), radius * (n @ e2)
+    r = np.hypot(a, b)
+    if not (radius > 1e-6 and r > 0.2 * radius):  # straight, or n along the axis: nothing to pick
+        return u
+    phi = np.arctan2(b, a)
+    spread = np.arccos(np.clip((n @ to_target - c * lower) / r, -1.0, 1.0))
+    psi = min((phi + spread, phi - spread), key=lambda x: abs(np.arctan2(np.sin(x), np.cos(x))))
+    return np.cos(psi) * u + np.sin(psi) * e2
 
 
 def _plane_frame(first: np.ndarray, second: np.ndarray) -> np.ndarray:

@@ -162,3 +162,20 @@ def test_knee_and_ankle_lost_together_beyond_the_thesis(walk):
             assert thigh.std() < 1e-6 and foot.std() < 1e-6
     assert err[True][0] < 0.05 and err[True][1] < 0.02, err
     assert (err[True] < err[False] / 3).all(), err
+
+
+def test_swivel_angle_from_the_next_joints_frame_known_answer():
+    """The point on the swivel circle where the bone to the target has a given component along an axis of
+    the target joint's frame: the answer satisfies it, and of the two it is the one nearer the prior."""
+    from mocap_core.gapfill import _on_circle_towards
+
+    axis, centre_to_target, radius, lower = np.array([0, 0, -1.0]), np.array([0, 0, -0.2]), 0.1, np.hypot(0.1, 0.2)
+    n = np.array([1.0, 0, 0])
+    for truth in np.radians([20, 75, 140, -60]):
+        elbow = radius * np.array([np.cos(truth), np.sin(truth), 0])
+        c = n @ (centre_to_target - elbow) / lower
+        prior = np.array([np.cos(truth + 0.3), np.sin(truth + 0.3), 0])  # 17 degrees off
+        u = _on_circle_towards(prior, axis, radius, centre_to_target, lower, n, c)
+        assert abs(np.linalg.norm(u) - 1) < 1e-9 and abs(u @ axis) < 1e-9
+        assert abs(n @ (centre_to_target - radius * u) / lower - c) < 1e-9
+        np.testing.assert_allclose(u, elbow / radius, atol=1e-9)
