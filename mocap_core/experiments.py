@@ -44,6 +44,7 @@ class TimingRow:
     std_ms: float
     mean_iterations: float
     mean_residual_mm: float
+    max_best_ms: float = float("nan")  # the max over frames of each frame's fastest pass (see below)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -63,9 +64,10 @@ def worst_case_timing(localized, solver: str, constraints: bool, params: SolverP
     params = params or SolverParams()
     params = SolverParams(params.max_iterations, params.stop_distance_m, constraints, params.escape_step_deg,
                           params.escape_max_deg)
-    times, iters, resid = [], [], []
+    passes, iters, resid = [], [], []
     for _ in range(repeats):
         filler = GapFiller(solver, params)
+        times = []
         for f in range(len(pos0)):
             pos, frames, status = pos0[f].copy(), frames0[f].copy(), status0[f].copy()
             if f > 0:
@@ -79,9 +81,13 @@ def worst_case_timing(localized, solver: str, constraints: bool, params: SolverP
                 times.append(dt * 1000)
                 iters.append(sum(s.iterations for s in stats.values()))
                 resid.append(max(s.residual_m for s in stats.values()) * 1000)
-    t = np.array(times)
+        passes.append(times)
+    t = np.concatenate(passes)
+    # Every pass does exactly the same work (the solve is deterministic), so a frame's fastest pass
+    # is its cost without the pauses a shared machine adds; the max of those is the steady worst case.
+    best = np.min(passes, axis=0)
     return TimingRow(solver, constraints, len(t), t.min(), t.max(), t.mean(), float(np.median(t)), t.std(),
-                     float(np.mean(iters)), float(np.mean(resid)))
+                     float(np.mean(iters)), float(np.mean(resid)), float(best.max()))
 
 
 # -- accuracy with gaps (thesis 4.2) ------------------------------------------------------------------------

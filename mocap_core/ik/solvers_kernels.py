@@ -160,6 +160,7 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
     attempt = 0
     fruitless = 0
     best_at_escape = best
+    window_best = best      # a limited non-CCD solver that does not halve its distance in a window crawls
     it = 0
     while it < max_iter and best > stop_m:
         _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
@@ -178,12 +179,24 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
             best = dist
             bestP[:] = P
             bestR[:] = R
+        crawling = False
+        if solver != CCD and constrained and it % (2 * STALL_ITERATIONS) == 0:
+            crawling = best > 0.5 * window_best
+            window_best = best
         # stuck, or an escape that has not beaten the best pose within a few iterations
-        if (since_gain >= STALL_ITERATIONS or since_best >= 2 * STALL_ITERATIONS) and best > stop_m:
+        if (since_gain >= STALL_ITERATIONS or since_best >= 2 * STALL_ITERATIONS or crawling) and best > stop_m:
             since_gain = 0
             since_best = 0
             P[:] = bestP
             R[:] = bestR
+            if solver != CCD and constrained:
+                # FABRIK's deadlock under limits (thesis 5): its passes ignore the limits that the
+                # backward pass then enforces, and the two undo each other; the Jacobian methods
+                # step the same way and get projected back. CCD sweeps, which turn each joint within
+                # its limits, finish the solve from the best pose found.
+                solver = CCD
+                local = best
+                continue
             fruitless = fruitless + 1 if best > best_at_escape * (1.0 - ESCAPE_GAIN) else 0
             best_at_escape = best
             if fruitless > escape_patience:
