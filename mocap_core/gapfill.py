@@ -94,8 +94,10 @@ class LimbFiller:
         # and toe markers): ankle, foot and toe are one rigid body, so the ankle keeps its last
         # offset from the foot, turned by the least rotation that carries the foot's last heel-to-toe
         # axis onto the current one. The knee is then a lone missing joint (swivel or IK).
+        # And a lost end of the limb (a hand, the head's top) moves with the last tracked bone before
+        # it (the forearm, the neck), where Algorithm 1 would carry it with the limb's parent (chest).
         self.carried = [(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb]) if name in CARRIED_BY_SEGMENT] \
-            if segment_carry else []
+            if segment_carry else None
         self.blend_offset = np.zeros((n, 3))
         self.last_out: np.ndarray | None = None
         self.last_status: np.ndarray | None = None
@@ -107,8 +109,9 @@ class LimbFiller:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton)."""
         t0 = time.perf_counter()
         out = np.zeros(4)
-        if self.carried and self.has_prev[0]:
+        if self.carried is not None and self.has_prev[0]:
             out[0] += self._segment_carry(positions, frames, status)
+            out[1] += self._carry_lost_end(positions, frames, status)
         if self.swivel:
             self._learn_directions(positions, frames, status)
             if self.has_prev[0]:
@@ -160,6 +163,26 @@ class LimbFiller:
             status[idx[j]] = Status.ESTIMATED
             filled += 1
         return filled
+
+    def _carry_lost_end(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
+        idx, prev, n = self.joints, self.prev_pos, len(self.joints)
+        j = n
+        while j > 0 and status[idx[j - 1]] == Status.MISSING:
+            j -= 1
+        root = j - 1  # the last located joint; the bone before it gives the turn
+        if j == n or root < 1 or status[idx[root]] == Status.MISSING or status[idx[root - 1]] == Status.MISSING:
+            return 0
+        bone_now, bone_prev = frames[idx[root - 1]], self.prev_frames[root - 1]
+        if not (np.isfinite(bone_now).all() and np.isfinite(bone_prev).all()):
+            return 0
+        turn = bone_now @ bone_prev.T
+        for m in range(root, n):
+            if m > root:
+                positions[idx[m]] = positions[idx[root]] + turn @ (prev[m] - prev[root])
+                status[idx[m]] = Status.HELD
+            if not np.isfinite(frames[idx[m]]).all():
+                frames[idx[m]] = turn @ self.prev_frames[m]
+        return n - j
 
     def _swivel_fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
         """Fill each run of missing joints between two located ones without iterating.

@@ -179,3 +179,22 @@ def test_swivel_angle_from_the_next_joints_frame_known_answer():
         assert abs(np.linalg.norm(u) - 1) < 1e-9 and abs(u @ axis) < 1e-9
         assert abs(n @ (centre_to_target - radius * u) / lower - c) < 1e-9
         np.testing.assert_allclose(u, elbow / radius, atol=1e-9)
+
+
+def test_lost_hand_moves_with_the_forearm(walk):
+    """Beyond the thesis: a lost end effector keeps its last pose relative to the last tracked bone before it
+    (the forearm), where Algorithm 1 keeps it relative to the limb's parent (the chest)."""
+    lm, prof = walk
+    truth, _, _ = localized(lm, prof)
+    hidden = lm.copy()
+    hidden[60:250, LANDMARK_INDEX["L_HM2"]] = np.nan
+    err = {}
+    for carry in (False, True):
+        pos, frames, status = localized(hidden, prof)
+        filler = GapFiller("ccd", segment_carry=carry)
+        for f in range(len(pos)):
+            filler.fill(pos[f], frames[f], status[f])
+        h = INDEX["hand_l"]
+        assert (status[60:250, h] == Status.HELD).all() and np.isfinite(frames[60:250, INDEX["wrist_l"]]).all()
+        err[carry] = np.linalg.norm(pos[60:250, h] - truth[60:250, h], axis=1)
+    assert err[True].mean() < 0.02 and err[True].mean() < err[False].mean() / 2, (err[True].mean(), err[False].mean())
