@@ -55,6 +55,7 @@ results-blend: $(STAMP)
 		--reacquire-step 0.01 --report docs/results/knee_ankle_dance_blend
 
 results-beyond: $(STAMP)
+	$(BIN)/mocap eval timing --constraints on --beyond --report docs/results/timing_beyond
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
 		--swivel --segment-carry --reacquire-step 0.01 --report docs/results/knee_ankle_dance_beyond

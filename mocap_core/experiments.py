@@ -57,7 +57,7 @@ def localize_take(rec: Recording, profile: Profile):
 
 
 def worst_case_timing(localized, solver: str, constraints: bool, params: SolverParams | None = None,
-                      repeats: int = 1) -> TimingRow:
+                      repeats: int = 1, fill_options: dict | None = None) -> TimingRow:
     """Time the full-body gap fill of every frame with every joint but the kept ones removed.
     Frame 0 stays complete: the IK chains start from the previous frame's solution (thesis 3.6)."""
     pos0, frames0, status0 = localized
@@ -66,7 +66,7 @@ def worst_case_timing(localized, solver: str, constraints: bool, params: SolverP
                           params.escape_max_deg)
     passes, iters, resid = [], [], []
     for _ in range(repeats):
-        filler = GapFiller(solver, params)
+        filler = GapFiller(solver, params, **(fill_options or {}))
         times = []
         for f in range(len(pos0)):
             pos, frames, status = pos0[f].copy(), frames0[f].copy(), status0[f].copy()

@@ -25,7 +25,7 @@ import numpy as np
 
 from numba import njit
 
-from mocap_core.geometry import rotation_between
+from mocap_core import analytic_fill as af
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
@@ -43,9 +43,6 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
     "right_leg": LIMBS["right_leg"],
 }
 LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
-MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
-STABLE_STD = 0.08   # ... and the spread of its steadiest component that still counts as steady
-BEND_MIN = 0.1  # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
 CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 
@@ -82,25 +79,19 @@ class LimbFiller:
         # gap between where IK had it and where the markers are is closed by at most this much per
         # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
         self.reacquire_step_m = reacquire_step_m
-        # Beyond the thesis: a single missing joint between two located ones (an elbow between
-        # shoulder and wrist, a knee between hip and ankle) lies on a circle fixed by its two bone
-        # lengths; where on it (the swivel angle) is carried over from the last frame in the frame of
-        # the limb's parent (chest or pelvis), not in world space. No iteration, no drift.
+        # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
+        # ones on their swivel circle; a lost ankle carried by its foot and a lost end by the bone
+        # before it. State: the last well-defined bend direction per run (joint, end, frame kind),
+        # and each bone's direction statistics in the frame of the joint it ends at.
         self.swivel = swivel
-        self.bend: dict[tuple, np.ndarray] = {}  # last well-defined bend direction per run, in its frame
-        # each bone's direction in the frame of the joint it ends at, learned while both are located
+        self.bend, self.bend_ok = np.zeros((n, n + 1, 2, 3)), np.zeros((n, n + 1, 2), bool)
         self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
-        # Beyond the thesis: a lost ankle moves with its foot while the foot is still tracked (heel
-        # and toe markers): ankle, foot and toe are one rigid body, so the ankle keeps its last
-        # offset from the foot, turned by the least rotation that carries the foot's last heel-to-toe
-        # axis onto the current one. The knee is then a lone missing joint (swivel or IK).
-        # And a lost end of the limb (a hand, the head's top) moves with the last tracked bone before
-        # it (the forearm, the neck), where Algorithm 1 would carry it with the limb's parent (chest).
-        self.carried = [(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb]) if name in CARRIED_BY_SEGMENT] \
+        self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
+                                 if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
         self.blend_offset = np.zeros((n, 3))
-        self.last_out: np.ndarray | None = None
-        self.last_status: np.ndarray | None = None
+        self.last_out, self.last_status = np.zeros((n, 3)), np.zeros(n, np.int64)
+        self.has_last = np.zeros(1, bool)
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                            c.twists[self.joints], c.has_twist[self.joints])
@@ -109,214 +100,26 @@ class LimbFiller:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton)."""
         t0 = time.perf_counter()
         out = np.zeros(4)
+        idx, prev_pos, prev_frames = self.joints, self.prev_pos, self.prev_frames
         if self.carried is not None and self.has_prev[0]:
-            out[0] += self._segment_carry(positions, frames, status)
-            out[1] += self._carry_lost_end(positions, frames, status)
+            out[0] += af.segment_carry(positions, frames, status, idx, self.carried, prev_pos, prev_frames)
+            out[1] += af.carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames)
         if self.swivel:
-            self._learn_directions(positions, frames, status)
+            af.learn_directions(positions, frames, status, idx, self.dir_sum, self.dir_sq, self.dir_n)
             if self.has_prev[0]:
-                out[0] += self._swivel_fill(positions, frames, status)
+                out[0] += af.swivel_fill(positions, frames, status, idx, self.parent_of_root, prev_pos, prev_frames,
+                                         self.prev_parent_frame, self.bend, self.bend_ok, self.dir_sum,
+                                         self.dir_sq, self.dir_n)
         p = self.params
         _fill_limb(positions, frames, status, self.joints, self.parent_of_root, self.limb.endswith("arm"),
                    self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
                    self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
                    p.escape_max_deg, out)
         if self.reacquire_step_m > 0:
-            self._blend_reacquired(positions, status)
+            af.blend_reacquired(positions, status, idx, self.last_out, self.last_status, self.has_last,
+                                self.blend_offset, self.reacquire_step_m)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
-
-    def _learn_directions(self, positions, frames, status) -> None:
-        idx = self.joints
-        for k in range(1, len(idx) - 1):
-            if status[idx[k]] != Status.LOCATED or status[idx[k + 1]] != Status.LOCATED:
-                continue
-            bone, frame = positions[idx[k + 1]] - positions[idx[k]], frames[idx[k + 1]]
-            size = np.linalg.norm(bone)
-            if size > 1e-6 and np.isfinite(frame).all():
-                local = frame.T @ (bone / size)
-                self.dir_sum[k] += local
-                self.dir_sq[k] += local * local
-                self.dir_n[k] += 1
-
-    def _stable_axis(self, k: int) -> tuple[int, float] | None:
-        """The axis of joint k+1's frame along which bone k's direction hardly varies (the forearm
-        against the radio-ulnar line of the wrist), and its mean component; None if there is none."""
-        if self.dir_n[k] < MIN_SAMPLES:
-            return None
-        mean = self.dir_sum[k] / self.dir_n[k]
-        std = np.sqrt(np.maximum(self.dir_sq[k] / self.dir_n[k] - mean * mean, 0.0))
-        axis = int(np.argmin(std))
-        return (axis, float(mean[axis])) if std[axis] < STABLE_STD else None
-
-    def _segment_carry(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
-        idx, prev, filled = self.joints, self.prev_pos, 0
-        for j, c, g in self.carried:
-            if status[idx[j]] != Status.MISSING or Status.MISSING in (status[idx[c]], status[idx[g]]):
-                continue
-            axis_prev, axis_now = prev[g] - prev[c], positions[idx[g]] - positions[idx[c]]
-            if not (np.isfinite(axis_now).all() and np.linalg.norm(axis_now) > 1e-6):
-                continue
-            turn = rotation_between(axis_prev, axis_now)
-            positions[idx[j]] = positions[idx[c]] + turn @ (prev[j] - prev[c])
-            frames[idx[j]] = turn @ self.prev_frames[j]
-            status[idx[j]] = Status.ESTIMATED
-            filled += 1
-        return filled
-
-    def _carry_lost_end(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
-        idx, prev, n = self.joints, self.prev_pos, len(self.joints)
-        j = n
-        while j > 0 and status[idx[j - 1]] == Status.MISSING:
-            j -= 1
-        root = j - 1  # the last located joint; the bone before it gives the turn
-        if j == n or root < 1 or status[idx[root]] == Status.MISSING or status[idx[root - 1]] == Status.MISSING:
-            return 0
-        bone_now, bone_prev = frames[idx[root - 1]], self.prev_frames[root - 1]
-        if not (np.isfinite(bone_now).all() and np.isfinite(bone_prev).all()):
-            return 0
-        turn = bone_now @ bone_prev.T
-        for m in range(root, n):
-            if m > root:
-                positions[idx[m]] = positions[idx[root]] + turn @ (prev[m] - prev[root])
-                status[idx[m]] = Status.HELD
-            if not np.isfinite(frames[idx[m]]).all():
-                frames[idx[m]] = turn @ self.prev_frames[m]
-        return n - j
-
-    def _swivel_fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray) -> int:
-        """Fill each run of missing joints between two located ones without iterating.
-
-        The first missing joint (an elbow, a knee) lies on a circle fixed by two lengths: its bone
-        from the located joint before the run, and the distance from it to the located joint after
-        the run, which the run's last shape keeps (for a lone joint that is simply its second bone;
-        for a knee and an ankle lost together it is knee to toe with the ankle angle held). Where on
-        the circle (the swivel angle) is carried over from the last frame in the frame of the located
-        joint after the run, else of the limb's parent (pelvis or chest): never in world space. The
-        rest of the run keeps its last shape in the plane of the two "bones"."""
-        idx, n = self.joints, len(self.joints)
-        parent_now, parent_prev = frames[self.parent_of_root], self.prev_parent_frame
-        if not (np.isfinite(parent_now).all() and np.isfinite(parent_prev).all()):
-            return 0
-        filled = 0
-        k = 1
-        while k < n - 1:
-            if not (status[idx[k]] == Status.MISSING and status[idx[k - 1]] != Status.MISSING):
-                k += 1
-                continue
-            b = k
-            while b < n and status[idx[b]] == Status.MISSING:
-                b += 1
-            if b == n:  # no located joint after the run: Algorithm 1's carry handles it
-                break
-            filled += self._fill_run(positions, frames, status, k - 1, k, b, parent_now, parent_prev)
-            k = b + 1
-        return filled
-
-    def _fill_run(self, positions, frames, status, a: int, k: int, b: int, parent_now, parent_prev) -> int:
-        """Joints k..b-1 missing, a and b located (limb-chain indices)."""
-        idx, prev = self.joints, self.prev_pos
-        pa, pk, pb = prev[a], prev[k], prev[b]
-        upper, lower = np.linalg.norm(pk - pa), np.linalg.norm(pb - pk)
-        root, target = positions[idx[a]], positions[idx[b]]
-        d = target - root
-        dist = np.linalg.norm(d)
-        if not (dist > 1e-9 and upper > 0 and lower > 0):
-            return 0
-        axis = d / dist
-        along = np.clip((upper * upper - lower * lower + dist * dist) / (2 * dist), -upper, upper)
-        radius = np.sqrt(max(upper * upper - along * along, 0.0))
-        # the previous bend direction, carried to now in the frame of the located joint after the run
-        # (the wrist for an elbow: it turns with the forearm), else in the limb parent's frame
-        d_prev = pb - pa
-        u_prev = (pk - pa) - ((pk - pa) @ d_prev) / (d_prev @ d_prev) * d_prev
-        ref_now, ref_prev = frames[idx[b]], self.prev_frames[b]
-        key = (a, k, b, True)
-        if not (np.isfinite(ref_now).all() and np.isfinite(ref_prev).all()):
-            ref_now, ref_prev, key = parent_now, parent_prev, (a, k, b, False)
-        # A nearly straight limb (a knee at mid-stance) has no bend direction worth the name: its sign
-        # is noise. Keep the last well-defined one (bent over BEND_MIN of the bone) in the frame.
-        size = np.linalg.norm(u_prev)
-        if size > BEND_MIN * upper:
-            self.bend[key] = ref_prev.T @ (u_prev / size)
-        local = self.bend.get(key)
-        if local is None:
-            if not size > 1e-9:
-                return 0
-            local = ref_prev.T @ (u_prev / size)
-        u = ref_now @ local
-        u = u - (u @ axis) * axis
-        nu = np.linalg.norm(u)
-        if not nu > 1e-9:
-            return 0
-        u = u / nu
-        # only a measured frame, not one carried over by segment_carry
-        stable = self._stable_axis(k) if b == k + 1 and key[3] and status[idx[b]] == Status.LOCATED else None
-        if stable is not None:  # the next joint's frame tells where on the circle: turn u there
-            u = _on_circle_towards(u, axis, radius, target - (root + along * axis), lower,
-                                   ref_now[:, stable[0]], stable[1])
-        knee = root + along * axis + radius * u
-        positions[idx[k]] = knee
-        # the rest of the run: its last shape, turned with the plane of (a, k, b)
-        turn = _plane_frame(knee - root, target - knee) @ _plane_frame(pk - pa, pb - pk).T
-        for j in range(k + 1, b):
-            positions[idx[j]] = knee + turn @ (prev[j] - pk)
-        for j in range(k, b):
-            frames[idx[j]] = turn @ self.prev_frames[j]
-        if not np.isfinite(frames[idx[b]]).all():
-            frames[idx[b]] = turn @ self.prev_frames[b]
-        like = frames[idx[a]] if np.isfinite(frames[idx[a]]).all() else parent_now @ parent_prev.T @ self.prev_frames[a]
-        frames[idx[a]] = _frame_along(knee - root, like)
-        status[idx[k:b]] = Status.ESTIMATED
-        return b - k
-
-    def _blend_reacquired(self, positions: np.ndarray, status: np.ndarray) -> None:
-        idx = self.joints
-        now = status[idx]
-        if self.last_out is not None:
-            back = (now == Status.LOCATED) & np.isin(self.last_status, (Status.ESTIMATED, Status.HELD))
-            back &= np.isfinite(self.last_out).all(axis=1)
-            self.blend_offset[back] = self.last_out[back] - positions[idx[back]]
-            self.blend_offset[now != Status.LOCATED] = 0.0
-            size = np.linalg.norm(self.blend_offset, axis=1)
-            active = size > 0
-            if active.any():
-                shrink = np.clip((size - self.reacquire_step_m) / np.where(active, size, 1.0), 0.0, 1.0)
-                self.blend_offset *= shrink[:, None]
-                positions[idx] += self.blend_offset
-        self.last_out = positions[idx].copy()
-        self.last_status = now.copy()
-
-
-def _on_circle_towards(u, axis, radius, to_target, lower, n, c):
-    """The direction on the swivel circle (from its centre) nearest to ``u`` at which the bone from
-    the circle to the target has the component ``c`` along ``n``, or ``u`` when none is near."""
-    e2 = np.cross(axis, u)
-    a, b = radius * (n @ u), radius * (n @ e2)
-    r = np.hypot(a, b)
-    if not (radius > 1e-6 and r > 0.2 * radius):  # straight, or n along the axis: nothing to pick
-        return u
-    phi = np.arctan2(b, a)
-    spread = np.arccos(np.clip((n @ to_target - c * lower) / r, -1.0, 1.0))
-    psi = min((phi + spread, phi - spread), key=lambda x: abs(np.arctan2(np.sin(x), np.cos(x))))
-    return np.cos(psi) * u + np.sin(psi) * e2
-
-
-def _plane_frame(first: np.ndarray, second: np.ndarray) -> np.ndarray:
-    """Orthonormal frame (columns) with x along ``second`` and y in the plane of the two bones."""
-    x = second / np.linalg.norm(second)
-    y = first - (first @ x) * x
-    ny = np.linalg.norm(y)
-    if not ny > 1e-9:  # a straight limb: any perpendicular will do
-        y = np.cross(x, [0.0, 0.0, 1.0] if abs(x[2]) < 0.9 else [1.0, 0.0, 0.0])
-        ny = np.linalg.norm(y)
-    y = y / ny
-    return np.column_stack([x, y, np.cross(x, y)])
-
-
-def _frame_along(y: np.ndarray, like: np.ndarray) -> np.ndarray:
-    """A bone frame whose y runs along ``y``, turned from ``like`` by the shortest arc."""
-    return rotation_between(like[:, 1], y) @ like
 
 
 @njit(cache=True)

@@ -20,8 +20,9 @@ def warm_up() -> None:
     loc = Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
     quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
     # one solve per solver, on a chain with a missing middle joint
-    for solver in SOLVERS:
-        filler = LimbFiller("left_leg", solver)
+    beyond = {"swivel": True, "segment_carry": True, "reacquire_step_m": 0.01}  # the analytic kernels too
+    for solver, options in [(s, {}) for s in SOLVERS] + [("ccd", beyond)]:
+        filler = LimbFiller("left_leg", solver, **options)
         pos = np.zeros((N_JOINTS, 3))
         frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))
         status = np.full(N_JOINTS, Status.LOCATED, np.uint8)
@@ -30,5 +31,7 @@ def warm_up() -> None:
         filler.fill(pos, frames, status)
         status[filler.joints[1]] = Status.MISSING
         pos[filler.joints[1]] = np.nan
+        filler.fill(pos, frames, status)
+        status[filler.joints[1:]] = Status.LOCATED
         filler.fill(pos, frames, status)
     del loc

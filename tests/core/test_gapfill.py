@@ -167,7 +167,7 @@ def test_knee_and_ankle_lost_together_beyond_the_thesis(walk):
 def test_swivel_angle_from_the_next_joints_frame_known_answer():
     """The point on the swivel circle where the bone to the target has a given component along an axis of
     the target joint's frame: the answer satisfies it, and of the two it is the one nearer the prior."""
-    from mocap_core.gapfill import _on_circle_towards
+    from mocap_core.analytic_fill import on_circle_towards as _on_circle_towards
 
     axis, centre_to_target, radius, lower = np.array([0, 0, -1.0]), np.array([0, 0, -0.2]), 0.1, np.hypot(0.1, 0.2)
     n = np.array([1.0, 0, 0])

@@ -1,0 +1,253 @@
+"""Gap filling beyond the thesis, without iterating (numba kernels; gapfill.LimbFiller calls them).
+
+- swivel_fill: a run of missing joints between two located ones. Its first joint lies on the circle
+  of its bone and of its distance to the located joint after the run (which the run's last shape
+  keeps); where on the circle is the last well-defined bend direction, carried in the frame of the
+  located joint after the run, else of the limb's parent, and turned to where the bone's direction
+  in that joint's frame has its usual value when one component of it hardly varies (the forearm
+  against the wrist's radio-ulnar line). The rest of the run keeps its last shape.
+- segment_carry: a lost ankle moves with its still-tracked foot (ankle, foot and toe are one body).
+- carry_lost_end: a lost end of the limb moves with the last tracked bone before it.
+- blend_reacquired: returning markers are met at most ``step`` metres a frame (inertialization).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from mocap_core.ik.kernels import mm, mtv, mv, rotation_between, vcross, vdot, vnorm
+
+MISSING, LOCATED, ESTIMATED, HELD = 0, 1, 2, 3   # mocap_core.skeleton.Status
+MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
+STABLE_STD = 0.08   # ... and the spread of its steadiest component that still counts as steady
+BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
+
+
+@njit(cache=True)
+def _finite(a):
+    for v in a.ravel():
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True)
+def learn_directions(positions, frames, status, idx, dir_sum, dir_sq, dir_n):
+    """Accumulate each bone's direction in the frame of the joint it ends at, while both are located."""
+    for k in range(1, idx.shape[0] - 1):
+        if status[idx[k]] != LOCATED or status[idx[k + 1]] != LOCATED:
+            continue
+        bone = positions[idx[k + 1]] - positions[idx[k]]
+        size = vnorm(bone)
+        frame = frames[idx[k + 1]].copy()
+        if size > 1e-6 and _finite(frame):
+            local = mtv(frame, bone / size)
+            for c in range(3):
+                dir_sum[k, c] += local[c]
+                dir_sq[k, c] += local[c] * local[c]
+            dir_n[k] += 1
+
+
+@njit(cache=True)
+def _frame_along(y, like):
+    """A bone frame whose y runs along ``y``, turned from ``like`` by the shortest arc."""
+    return mm(rotation_between(like[:, 1].copy(), y), like)
+
+
+@njit(cache=True)
+def _plane_frame(first, second):
+    """Orthonormal frame (columns) with x along ``second`` and y in the plane of the two bones."""
+    x = second / vnorm(second)
+    y = first - vdot(first, x) * x
+    ny = vnorm(y)
+    if not ny > 1e-9:  # a straight limb: any perpendicular will do
+        helper = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        y = vcross(x, helper)
+        ny = vnorm(y)
+    y = y / ny
+    out = np.empty((3, 3))
+    out[:, 0], out[:, 1], out[:, 2] = x, y, vcross(x, y)
+    return out
+
+
+@njit(cache=True)
+def _wrap(a):
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+@njit(cache=True)
+def on_circle_towards(u, axis, radius, to_target, lower, n, c):
+    """The direction on the swivel circle (from its centre) nearest to ``u`` at which the bone from
+    the circle to the target has the component ``c`` along ``n``, or ``u`` when none is near."""
+    e2 = vcross(axis, u)
+    a, b = radius * vdot(n, u), radius * vdot(n, e2)
+    r = math.hypot(a, b)
+    if not (radius > 1e-6 and r > 0.2 * radius):  # straight, or n along the axis: nothing to pick
+        return u
+    phi = math.atan2(b, a)
+    spread = math.acos(min(1.0, max(-1.0, (vdot(n, to_target) - c * lower) / r)))
+    psi = phi + spread if abs(_wrap(phi + spread)) <= abs(_wrap(phi - spread)) else phi - spread
+    return math.cos(psi) * u + math.sin(psi) * e2
+
+
+@njit(cache=True)
+def _stable_axis(k, dir_sum, dir_sq, dir_n):
+    """(axis, mean component) of the steadiest component of bone k's direction, or (-1, 0)."""
+    best, mean_c, spread = -1, 0.0, STABLE_STD
+    if dir_n[k] < MIN_SAMPLES:
+        return best, mean_c
+    for c in range(3):
+        m = dir_sum[k, c] / dir_n[k]
+        sd = math.sqrt(max(dir_sq[k, c] / dir_n[k] - m * m, 0.0))
+        if sd < spread:
+            best, mean_c, spread = c, m, sd
+    return best, mean_c
+
+
+@njit(cache=True)
+def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, prev_pos, prev_frames,
+              bend, bend_ok, dir_sum, dir_sq, dir_n):
+    pa, pk, pb = prev_pos[a], prev_pos[k], prev_pos[b]
+    upper, lower = vnorm(pk - pa), vnorm(pb - pk)
+    root, target = positions[idx[a]].copy(), positions[idx[b]].copy()
+    d = target - root
+    dist = vnorm(d)
+    if not (dist > 1e-9 and upper > 0 and lower > 0):
+        return 0
+    axis = d / dist
+    along = min(upper, max(-upper, (upper * upper - lower * lower + dist * dist) / (2 * dist)))
+    radius = math.sqrt(max(upper * upper - along * along, 0.0))
+    d_prev = pb - pa
+    u_prev = (pk - pa) - (vdot(pk - pa, d_prev) / vdot(d_prev, d_prev)) * d_prev
+    ref_now, ref_prev, kind = frames[idx[b]].copy(), prev_frames[b].copy(), 0
+    if not (_finite(ref_now) and _finite(ref_prev)):
+        ref_now, ref_prev, kind = parent_now, prev_parent.copy(), 1
+    # A nearly straight limb (a knee at mid-stance) has no bend direction worth the name: its sign
+    # is noise. Keep the last well-defined one, in the reference frame.
+    size = vnorm(u_prev)
+    if size > BEND_MIN * upper:
+        bend[k, b, kind] = mtv(ref_prev, u_prev / size)
+        bend_ok[k, b, kind] = True
+    if bend_ok[k, b, kind]:
+        local = bend[k, b, kind].copy()
+    elif size > 1e-9:
+        local = mtv(ref_prev, u_prev / size)
+    else:
+        return 0
+    u = mv(ref_now, local)
+    u = u - vdot(u, axis) * axis
+    nu = vnorm(u)
+    if not nu > 1e-9:
+        return 0
+    u = u / nu
+    if b == k + 1 and kind == 0 and status[idx[b]] == LOCATED:  # a measured frame, not a carried one
+        c, mean_c = _stable_axis(k, dir_sum, dir_sq, dir_n)
+        if c >= 0:
+            u = on_circle_towards(u, axis, radius, target - (root + along * axis), lower, ref_now[:, c].copy(),
+                                  mean_c)
+    joint = root + along * axis + radius * u
+    positions[idx[k]] = joint
+    # the rest of the run: its last shape, turned with the plane of (a, k, b)
+    turn = mm(_plane_frame(joint - root, target - joint), _plane_frame(pk - pa, pb - pk).T.copy())
+    for j in range(k + 1, b):
+        positions[idx[j]] = joint + mv(turn, prev_pos[j] - pk)
+    for j in range(k, b):
+        frames[idx[j]] = mm(turn, prev_frames[j])
+        status[idx[j]] = ESTIMATED
+    if not _finite(frames[idx[b]]):
+        frames[idx[b]] = mm(turn, prev_frames[b])
+    like = frames[idx[a]].copy()
+    if not _finite(like):
+        like = mm(mm(parent_now, prev_parent.T.copy()), prev_frames[a])
+    frames[idx[a]] = _frame_along(joint - root, like)
+    return b - k
+
+
+@njit(cache=True)
+def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, prev_parent, bend, bend_ok,
+                dir_sum, dir_sq, dir_n):
+    """Fill every run of missing joints that has a located joint on both sides; returns how many."""
+    parent_now = frames[parent].copy()
+    if not (_finite(parent_now) and _finite(prev_parent)):
+        return 0
+    n, filled, k = idx.shape[0], 0, 1
+    while k < n - 1:
+        if not (status[idx[k]] == MISSING and status[idx[k - 1]] != MISSING):
+            k += 1
+            continue
+        b = k
+        while b < n and status[idx[b]] == MISSING:
+            b += 1
+        if b == n:  # no located joint after the run: Algorithm 1's carry handles it
+            break
+        filled += _fill_run(positions, frames, status, idx, k - 1, k, b, parent_now, prev_parent, prev_pos,
+                            prev_frames, bend, bend_ok, dir_sum, dir_sq, dir_n)
+        k = b + 1
+    return filled
+
+
+@njit(cache=True)
+def segment_carry(positions, frames, status, idx, carried, prev_pos, prev_frames):
+    """carried: rows (j, c, g) of one rigid body; a lost j keeps its last offset from c, turned by the
+    least rotation that carries the last c->g axis onto the current one."""
+    filled = 0
+    for t in range(carried.shape[0]):
+        j, c, g = carried[t, 0], carried[t, 1], carried[t, 2]
+        if status[idx[j]] != MISSING or status[idx[c]] == MISSING or status[idx[g]] == MISSING:
+            continue
+        axis_now = positions[idx[g]] - positions[idx[c]]
+        if not (_finite(axis_now) and vnorm(axis_now) > 1e-6):
+            continue
+        turn = rotation_between(prev_pos[g] - prev_pos[c], axis_now)
+        positions[idx[j]] = positions[idx[c]] + mv(turn, prev_pos[j] - prev_pos[c])
+        frames[idx[j]] = mm(turn, prev_frames[j])
+        status[idx[j]] = ESTIMATED
+        filled += 1
+    return filled
+
+
+@njit(cache=True)
+def carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames):
+    """The missing tail of the limb keeps its last pose relative to the last tracked bone before it."""
+    n = idx.shape[0]
+    j = n
+    while j > 0 and status[idx[j - 1]] == MISSING:
+        j -= 1
+    root = j - 1
+    if j == n or root < 1 or status[idx[root]] == MISSING or status[idx[root - 1]] == MISSING:
+        return 0
+    bone_now, bone_prev = frames[idx[root - 1]].copy(), prev_frames[root - 1]
+    if not (_finite(bone_now) and _finite(bone_prev)):
+        return 0
+    turn = mm(bone_now, bone_prev.T.copy())
+    for m in range(root, n):
+        if m > root:
+            positions[idx[m]] = positions[idx[root]] + mv(turn, prev_pos[m] - prev_pos[root])
+            status[idx[m]] = HELD
+        if not _finite(frames[idx[m]]):
+            frames[idx[m]] = mm(turn, prev_frames[m])
+    return n - j
+
+
+@njit(cache=True)
+def blend_reacquired(positions, status, idx, last_out, last_status, has_last, offset, step):
+    """When a joint's markers come back, start from where the estimate had it and close the gap by at
+    most ``step`` metres a frame (a rate-limited decaying offset)."""
+    n = idx.shape[0]
+    if has_last[0]:
+        for k in range(n):
+            s = status[idx[k]]
+            if s == LOCATED and (last_status[k] == ESTIMATED or last_status[k] == HELD) and _finite(last_out[k]):
+                offset[k] = last_out[k] - positions[idx[k]]
+            if s != LOCATED:
+                offset[k] = 0.0
+            size = vnorm(offset[k])
+            if size > 0:
+                offset[k] *= min(1.0, max(0.0, (size - step) / size))
+                positions[idx[k]] += offset[k]
+    for k in range(n):
+        last_out[k] = positions[idx[k]]
+        last_status[k] = status[idx[k]]
+    has_last[0] = True
