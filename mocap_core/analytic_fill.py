@@ -26,7 +26,7 @@ BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off t
 
 
 @njit(cache=True)
-def _finite(a):
+def all_finite(a):
     for v in a.ravel():
         if not np.isfinite(v):
             return False
@@ -42,7 +42,7 @@ def learn_directions(positions, frames, status, idx, dir_sum, dir_sq, dir_n):
         bone = positions[idx[k + 1]] - positions[idx[k]]
         size = vnorm(bone)
         frame = frames[idx[k + 1]].copy()
-        if size > 1e-6 and _finite(frame):
+        if size > 1e-6 and all_finite(frame):
             local = mtv(frame, bone / size)
             for c in range(3):
                 dir_sum[k, c] += local[c]
@@ -122,7 +122,7 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
     d_prev = pb - pa
     u_prev = (pk - pa) - (vdot(pk - pa, d_prev) / vdot(d_prev, d_prev)) * d_prev
     ref_now, ref_prev, kind = frames[idx[b]].copy(), prev_frames[b].copy(), 0
-    if not (_finite(ref_now) and _finite(ref_prev)):
+    if not (all_finite(ref_now) and all_finite(ref_prev)):
         ref_now, ref_prev, kind = parent_now, prev_parent.copy(), 1
     # A nearly straight limb (a knee at mid-stance) has no bend direction worth the name: its sign
     # is noise. Keep the last well-defined one, in the reference frame.
@@ -156,10 +156,10 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
     for j in range(k, b):
         frames[idx[j]] = mm(turn, prev_frames[j])
         status[idx[j]] = ESTIMATED
-    if not _finite(frames[idx[b]]):
+    if not all_finite(frames[idx[b]]):
         frames[idx[b]] = mm(turn, prev_frames[b])
     like = frames[idx[a]].copy()
-    if not _finite(like):
+    if not all_finite(like):
         like = mm(mm(parent_now, prev_parent.T.copy()), prev_frames[a])
     frames[idx[a]] = _frame_along(joint - root, like)
     return b - k
@@ -170,7 +170,7 @@ def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, p
                 dir_sum, dir_sq, dir_n):
     """Fill every run of missing joints that has a located joint on both sides; returns how many."""
     parent_now = frames[parent].copy()
-    if not (_finite(parent_now) and _finite(prev_parent)):
+    if not (all_finite(parent_now) and all_finite(prev_parent)):
         return 0
     n, filled, k = idx.shape[0], 0, 1
     while k < n - 1:
@@ -198,7 +198,7 @@ def segment_carry(positions, frames, status, idx, carried, prev_pos, prev_frames
         if status[idx[j]] != MISSING or status[idx[c]] == MISSING or status[idx[g]] == MISSING:
             continue
         axis_now = positions[idx[g]] - positions[idx[c]]
-        if not (_finite(axis_now) and vnorm(axis_now) > 1e-6):
+        if not (all_finite(axis_now) and vnorm(axis_now) > 1e-6):
             continue
         turn = rotation_between(prev_pos[g] - prev_pos[c], axis_now)
         positions[idx[j]] = positions[idx[c]] + mv(turn, prev_pos[j] - prev_pos[c])
@@ -219,14 +219,14 @@ def carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames):
     if j == n or root < 1 or status[idx[root]] == MISSING or status[idx[root - 1]] == MISSING:
         return 0
     bone_now, bone_prev = frames[idx[root - 1]].copy(), prev_frames[root - 1]
-    if not (_finite(bone_now) and _finite(bone_prev)):
+    if not (all_finite(bone_now) and all_finite(bone_prev)):
         return 0
     turn = mm(bone_now, bone_prev.T.copy())
     for m in range(root, n):
         if m > root:
             positions[idx[m]] = positions[idx[root]] + mv(turn, prev_pos[m] - prev_pos[root])
             status[idx[m]] = HELD
-        if not _finite(frames[idx[m]]):
+        if not all_finite(frames[idx[m]]):
             frames[idx[m]] = mm(turn, prev_frames[m])
     return n - j
 
@@ -239,7 +239,7 @@ def blend_reacquired(positions, status, idx, last_out, last_status, has_last, of
     if has_last[0]:
         for k in range(n):
             s = status[idx[k]]
-            if s == LOCATED and (last_status[k] == ESTIMATED or last_status[k] == HELD) and _finite(last_out[k]):
+            if s == LOCATED and (last_status[k] == ESTIMATED or last_status[k] == HELD) and all_finite(last_out[k]):
                 offset[k] = last_out[k] - positions[idx[k]]
             if s != LOCATED:
                 offset[k] = 0.0

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from mocap_core import analytic_fill as af
+from mocap_core.analytic_fill import all_finite
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
@@ -123,14 +124,6 @@ class LimbFiller:
 
 
 @njit(cache=True)
-def _all_finite(a):
-    for v in a.ravel():
-        if not np.isfinite(v):
-            return False
-    return True
-
-
-@njit(cache=True)
 def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_frames, prev_parent, has_prev,
                pp, cones, has_cone, twists, has_twist, solver, constrained, max_iter, stop_m, esc_step, esc_max,
                out):
@@ -141,7 +134,7 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
         # the clavicle joint sits on the sternum-clavicle point, its parent's position (facts 9.1)
         positions[idx[0]] = positions[parent]
         status[idx[0]] = ESTIMATED
-    parent_ok = _all_finite(parent_frame)
+    parent_ok = all_finite(parent_frame)
     if has_prev[0] and parent_ok and status[idx[0]] != MISSING:
         i = 1
         while i < n:
@@ -159,7 +152,7 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
                 P[k] = prev_pos[root + k] - prev_pos[root] + positions[idx[root]]
             R = prev_frames[root:last].copy()
             ref0 = parent_frame if root == 0 else frames[idx[root - 1]].copy()
-            if not _all_finite(ref0):
+            if not all_finite(ref0):
                 ref0 = parent_frame
             if t < n:
                 target = positions[idx[t]].astype(np.float64)
@@ -188,11 +181,11 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
     # remember this frame's limb as the next frame's starting chain, if it is whole
     whole = parent_ok
     for k in range(n):
-        whole = whole and _all_finite(positions[idx[k]])
+        whole = whole and all_finite(positions[idx[k]])
     if whole:
         for k in range(n):
             prev_pos[k] = positions[idx[k]]
-            if _all_finite(frames[idx[k]]) or not has_prev[0]:
+            if all_finite(frames[idx[k]]) or not has_prev[0]:
                 prev_frames[k] = frames[idx[k]]  # an end joint without a frame keeps its previous one
         prev_parent[:] = parent_frame
         has_prev[0] = True
