@@ -27,6 +27,9 @@ def add_parser(sub) -> None:
     s.add_argument("--solver", default="ccd", choices=sorted(SOLVERS), help="IK solver for gaps (default ccd)")
     s.add_argument("--no-constraints", action="store_true", help="solve without joint limits")
     s.add_argument("--no-ik", action="store_true", help="localization only: leave missing joints missing")
+    s.add_argument("--thesis", action="store_true",
+                   help="fill gaps exactly as the thesis did (default: with the improvements the studio launch files "
+                        "use: hips fitted to the body, swivel, segment carry, re-acquisition blend)")
     s.add_argument("--constraints", help="joint-limit YAML (default: the thesis's values)")
     s.add_argument("--max-iterations", type=int, default=140)
     s.add_argument("--stop-distance", type=float, default=0.01, help="IK stop distance in metres")
@@ -44,7 +47,7 @@ def run(args) -> int:
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)
     pipe = SkeletonPipeline(profile, rec.labels, args.solver, params, load_constraints(args.constraints),
-                            fill_gaps=not args.no_ik)
+                            fill_gaps=not args.no_ik, beyond=not args.thesis)
     times = rec.times()
     counts = {s: 0 for s in Status}
     t0 = time.perf_counter()

@@ -35,11 +35,14 @@ class SolvedChunk:
 class SkeletonPipeline:
     def __init__(self, profile: Profile, labels: list[str], solver: str = "ccd",
                  params: SolverParams | None = None, constraints: Constraints | None = None,
-                 fill_gaps: bool = True):
+                 fill_gaps: bool = True, beyond: bool = False):
+        """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
+        to the body when all are lost, swivel, segment carry, re-acquisition blend)."""
         self.landmark_map = profile.resolve(labels)
-        self.hips = HipInterpolator()
+        self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         self.localizer = Localizer(profile.body)
-        self.filler = GapFiller(solver, params, constraints) if fill_gaps else None
+        self.filler = GapFiller(solver, params, constraints, reacquire_step_m=0.01 if beyond else 0.0, swivel=beyond,
+                                segment_carry=beyond) if fill_gaps else None
 
     def landmarks(self, markers: np.ndarray) -> np.ndarray:
         """Marker frames (F, N, 3) -> landmark frames with the pelvis markers filled."""
