@@ -43,16 +43,25 @@ class QtmIngest(Node):
         self.inbox: queue.Queue = queue.Queue(maxsize=10000)
         self.labels: list[str] = []
         self.stopping = threading.Event()
+        self.started_ns: int | None = None
+        self.stale, self.stale_logged = 0, False
         self.thread = threading.Thread(target=self._client_thread, name="qtm-rt", daemon=True)
         self.thread.start()
 
     def tick(self) -> float | None:
+        if self.started_ns is None:
+            # The client streams from setup on, so that a missing QTM shows before the graph starts;
+            # what came before the graph was ready is stale: it would enter as a burst seconds late.
+            self.started_ns = time.time_ns()
         try:
             item = self.inbox.get(timeout=0.05)
         except queue.Empty:
             return 0.0
         while True:
             kind, payload = item
+            if kind == "frame" and payload[3] < self.started_ns:
+                self.stale += 1
+                kind = "stale"
             if kind == "set":
                 self.labels, rate = payload
                 self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=self.labels,
@@ -64,6 +73,9 @@ class QtmIngest(Node):
             try:
                 item = self.inbox.get_nowait()
             except queue.Empty:
+                if self.stale and not self.stale_logged:
+                    self.stale_logged = True
+                    self.log.info("skipped %d frames received before the graph was ready", self.stale)
                 return 0.0
 
     def _publish_frame(self, frame: int, timestamp_us: int, xyz_mm: np.ndarray, received_ns: int) -> None:

@@ -1,4 +1,4 @@
-"""A consumer that takes too long per frame (for the slow-consumer test)."""
+"""A consumer that takes too long per frame, or to start (slow-consumer and start-up tests)."""
 import time
 
 from pydantic import BaseModel
@@ -9,12 +9,16 @@ from nodes.runtime import Node
 
 class Params(BaseModel):
     delay_s: float = 0.05
+    setup_s: float = 0.0   # a node that takes this long to get ready (the graph waits for it)
 
 
 class SlowSink(Node):
     kind = "slow_sink"
     Params = Params
     subscribes = {"markers/raw": MarkerFrame}
+
+    def setup(self):
+        time.sleep(self.params.setup_s)
 
     def on_message(self, topic, msg):
         time.sleep(self.params.delay_s)

@@ -150,3 +150,29 @@ nodes:
             wait_for(lambda: count() > n + 50, 30, "frames after QTM came back")
         assert g.proc.poll() is None and "restarted node" not in g.log()
         assert "not reachable; retrying" in g.log()
+
+
+def test_ingest_skips_frames_from_before_the_graph_was_ready(tmp_path):
+    """QTM streams while a slow node still starts: those frames are stale and must not enter the graph as a
+    burst seconds late (every logged frame is fresh)."""
+    out = tmp_path / "raw.csv"
+    with emulator(tmp_path, "--loop") as (sim, port):
+        graph = f"""
+nodes:
+  - id: qtm
+    kind: qtm_ingest
+    params: {{port: {port}}}
+  - id: slow
+    kind: tests.fixtures_nodes.slow_sink:SlowSink
+    params: {{delay_s: 0.0, setup_s: 3.0}}
+  - id: log
+    kind: frame_log
+    params: {{path: {out}}}
+    remaps: {{in: markers/raw}}
+"""
+        with launched(tmp_path, graph) as g:
+            wait_for(lambda: out.exists() and sum(1 for _ in open(out)) > 200, 30, "frames from QTM")
+            wait_for(lambda: "received before the graph was ready" in g.log(), 10, "the skipped frames to be logged")
+    with open(out) as f:
+        lat_ms = [float(r["latency_us"]) / 1000 for r in csv.DictReader(f)]
+    assert max(lat_ms) < 500, max(lat_ms)  # without the skip the first frames are ~3 s old
