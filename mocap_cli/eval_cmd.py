@@ -11,6 +11,7 @@ from tqdm import tqdm
 
 from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, localize_take, reacquisition_jump,
                                     worst_case_timing)
+from mocap_core.gapfill import BEYOND_THESIS
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
@@ -94,8 +95,7 @@ def run_timing(args) -> int:
     for constrained in modes:
         for solver in tqdm(solvers, desc=f"constraints {'on' if constrained else 'off'}", unit="solver"):
             rows.append(worst_case_timing(localized, solver, constrained, SolverParams(), args.repeats,
-                                          {"swivel": args.beyond, "segment_carry": args.beyond,
-                                           "reacquire_step_m": 0.01 if args.beyond else 0.0}))
+                                          BEYOND_THESIS if args.beyond else {}))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "timing.csv", "w", newline="") as f:

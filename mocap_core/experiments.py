@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocap_core.gapfill import GapFiller
+from mocap_core.hip_interpolation import HIP_LANDMARKS, HipInterpolator
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import Profile
@@ -105,7 +106,7 @@ SEGMENT_OF = {"pelvis": ("pelvis", "spine0", "hip_l", "hip_r")}
 
 def landmarks_of(joint: str) -> list[str]:
     if joint == "pelvis":  # every hip marker
-        return ["SACR", "L_IAS", "R_IAS"]
+        return list(HIP_LANDMARKS)
     base, _, side = joint.rpartition("_")
     if base not in JOINT_LANDMARKS or side not in ("l", "r"):
         raise ValueError(f"cannot remove {joint!r} by markers (joints: pelvis, "
@@ -137,7 +138,6 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
             fill_options: dict | None = None, hips_lost: str = "hold") -> GapRun:
     """Hide ``joints`` in frames [start, stop) and fill them; compare with the complete take."""
-    from mocap_core.hip_interpolation import HipInterpolator
     from mocap_core.localization import Localizer
     from mocap_core.profiles import LANDMARK_INDEX
 

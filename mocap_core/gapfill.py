@@ -44,6 +44,9 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
     "right_leg": LIMBS["right_leg"],
 }
 LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
+# The gap-filling options beyond the thesis, as the studio launch files, `mocap solve` and
+# `mocap eval timing --beyond` use them (README "Results").
+BEYOND_THESIS = {"swivel": True, "segment_carry": True, "reacquire_step_m": 0.01}
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
 CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 

@@ -57,7 +57,8 @@ class HipInterpolator:
         interpolated = np.zeros(3, bool)
         if seen.all():
             self.last_known = out.copy()
-            self.last_anchors = None if anchors is None else np.asarray(anchors, np.float64).copy()
+            if self.when_lost == "fit" and anchors is not None:  # only a fit needs them
+                self.last_anchors = np.array(anchors, np.float64)
         elif self.last_known is not None:
             lk = self.last_known
             idx = np.flatnonzero(seen)

@@ -11,7 +11,7 @@ from typing import Iterator
 
 import numpy as np
 
-from mocap_core.gapfill import GapFiller
+from mocap_core.gapfill import BEYOND_THESIS, GapFiller
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
@@ -41,8 +41,8 @@ class SkeletonPipeline:
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         self.localizer = Localizer(profile.body)
-        self.filler = GapFiller(solver, params, constraints, reacquire_step_m=0.01 if beyond else 0.0, swivel=beyond,
-                                segment_carry=beyond) if fill_gaps else None
+        options = BEYOND_THESIS if beyond else {}
+        self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
 
     def landmarks(self, markers: np.ndarray) -> np.ndarray:
         """Marker frames (F, N, 3) -> landmark frames with the pelvis markers filled."""

@@ -10,7 +10,7 @@ import numpy as np
 
 
 def warm_up() -> None:
-    from mocap_core.gapfill import LimbFiller
+    from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.ik.solvers import SOLVERS
     from mocap_core.localization import Localizer
@@ -20,8 +20,7 @@ def warm_up() -> None:
     loc = Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
     quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
     # one solve per solver, on a chain with a missing middle joint
-    beyond = {"swivel": True, "segment_carry": True, "reacquire_step_m": 0.01}  # the analytic kernels too
-    for solver, options in [(s, {}) for s in SOLVERS] + [("ccd", beyond)]:
+    for solver, options in [(s, {}) for s in SOLVERS] + [("ccd", BEYOND_THESIS)]:  # the analytic kernels too
         filler = LimbFiller("left_leg", solver, **options)
         pos = np.zeros((N_JOINTS, 3))
         frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))

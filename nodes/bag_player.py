@@ -54,6 +54,7 @@ class BagPlayer(Node):
         self.i = 0
         self.t0_bag = self.messages[0].log_time_ns
         self.t0 = None
+        self.spin_s = p.spin_ms / 1000
         self.lockstep = Lockstep(self.ctx, p.lockstep_topic, p.lockstep_timeout_s)
         self.log.info("playing %d messages from %s", len(self.messages), p.path)
 
@@ -74,9 +75,8 @@ class BagPlayer(Node):
         m = self.messages[self.i]
         if not p.lockstep_topic:
             due = self.t0 + (m.log_time_ns - self.t0_bag) / 1e9 / p.rate
-            spin = p.spin_ms / 1000
-            if due - now > max(spin, 0.0002):
-                return due - now - spin
+            if due - now > max(self.spin_s, 0.0002):
+                return due - now - self.spin_s
             while time.monotonic() < due:  # the last stretch: a spin is on time, a sleep often is not
                 pass
         self._send(m)
@@ -86,7 +86,7 @@ class BagPlayer(Node):
             return 0.0002
         if self.i < len(self.messages) and not p.lockstep_topic:
             nxt = self.t0 + (self.messages[self.i].log_time_ns - self.t0_bag) / 1e9 / p.rate
-            return max(0.0, nxt - time.monotonic() - p.spin_ms / 1000)
+            return max(0.0, nxt - time.monotonic() - self.spin_s)
         return 0.0
 
     def _send(self, m) -> None:

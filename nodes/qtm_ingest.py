@@ -61,8 +61,7 @@ class QtmIngest(Node):
             kind, payload = item
             if kind == "frame" and payload[3] < self.started_ns:
                 self.stale += 1
-                kind = "stale"
-            if kind == "set":
+            elif kind == "set":
                 self.labels, rate = payload
                 self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=self.labels,
                                                           rate_hz=rate, source=f"qtm://{self.params.host}"))
