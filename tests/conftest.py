@@ -16,6 +16,22 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
 
 
+def pytest_sessionstart(session):
+    """Compile (or load) the numba kernels once, before any test's timeout starts.
+
+    On a fresh clone the first compile takes a minute or two; done inside the first test that needs
+    it (often in a subprocess), it ate that test's timeout. The compiled code is cached on disk, so
+    every node and CLI process the tests start afterwards only loads it.
+    """
+    from mocap_core.warmup import warm_up
+
+    started = time.monotonic()
+    warm_up()
+    elapsed = time.monotonic() - started
+    if elapsed > 5:
+        print(f"\nnumba kernels compiled and cached in {elapsed:.0f} s (first run on this checkout only)")
+
+
 def data_file(name: str) -> Path:
     """A recording from ../shared/data; a missing file fails the test loudly (never a skip)."""
     path = DATA / name
