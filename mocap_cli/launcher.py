@@ -35,6 +35,7 @@ from nodes.spec import NodeSpec
 
 log = logging.getLogger("mocap.launch")
 STOP_GRACE_S = 1.5
+STANDBY_WAIT_S = 15.0  # longest the sources wait for the spare process to finish loading
 BACKOFF_FIRST_S, BACKOFF_MAX_S, BACKOFF_RESET_S = 0.1, 5.0, 10.0
 
 
@@ -117,6 +118,7 @@ class Launcher:
         self.t0 = time.monotonic()
         self.registry = registry_path(lf.name)
         self.standby: subprocess.Popen | None = None
+        self.standby_warm = False
 
     # -- processes -----------------------------------------------------------------------------------
     def _spawn(self, p: Proc) -> None:
@@ -129,7 +131,9 @@ class Launcher:
     def _spawn_standby(self) -> None:
         """Keep one warm spare process: a restart hands it the dead node's spec instead of paying
         for a new python's start-up and kernel loading."""
-        self.standby = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby"], stdin=subprocess.PIPE)
+        self.standby = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby", self.control_endpoint],
+                                        stdin=subprocess.PIPE)
+        self.standby_warm = False
 
     def _respawn(self, p: Proc) -> None:
         spare, self.standby = self.standby, None
@@ -169,6 +173,9 @@ class Launcher:
                 return
             except ValueError:
                 continue
+            if verb == b"warm":
+                self.standby_warm = True
+                continue
             if verb != b"ready" or not rest:
                 continue
             node_id = rest[0].decode()
@@ -177,13 +184,20 @@ class Launcher:
                     p.ready, p.identity = True, identity
                     if self.graph_started and p.is_source:
                         self.control.send_multipart([identity, b"start"])
-            if not self.graph_started and all(p.ready or p.finished for p in self.procs):
-                self.graph_started = True
-                log.info("graph %s ready in %.0f ms: starting sources", self.lf.name,
-                         (time.monotonic() - self.t0) * 1000)
-                for p in self.procs:
-                    if p.is_source and p.identity:
-                        self.control.send_multipart([p.identity, b"start"])
+
+    def _maybe_start(self, now: float) -> None:
+        """Start the sources once every node is ready and the spare process has done its loading
+        (it would otherwise take a core from the graph's first second: 10-70 ms stalls)."""
+        if self.graph_started or not all(p.ready or p.finished for p in self.procs):
+            return
+        spare_busy = self.standby is not None and self.standby.poll() is None and not self.standby_warm
+        if spare_busy and now - self.t0 < STANDBY_WAIT_S:
+            return
+        self.graph_started = True
+        log.info("graph %s ready in %.0f ms: starting sources", self.lf.name, (now - self.t0) * 1000)
+        for p in self.procs:
+            if p.is_source and p.identity:
+                self.control.send_multipart([p.identity, b"start"])
 
     def _watch(self, now: float) -> None:
         for p in self.procs:
@@ -234,6 +248,7 @@ class Launcher:
                 if poller.poll(50):
                     self._on_control()
                 now = time.monotonic()
+                self._maybe_start(now)
                 self._watch(now)
                 if duration_s is not None and now - self.t0 >= duration_s:
                     break

@@ -23,19 +23,34 @@ def _die_with_parent() -> None:
         pass
 
 
+def _tell_launcher_warm(control_endpoint: str) -> None:
+    """The launcher holds the sources back until the spare is warm: its loading competes for the CPU."""
+    import zmq
+
+    ctx = zmq.Context.instance()
+    sock = ctx.socket(zmq.DEALER)
+    sock.setsockopt(zmq.LINGER, 1000)
+    sock.connect(control_endpoint)
+    sock.send(b"warm")
+    sock.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 1:
-        print("usage: python -m nodes.run '<NodeSpec JSON>' | --standby  (normally started by `mocap launch`)",
-              file=sys.stderr)
+    standby = bool(argv) and argv[0] == "--standby"
+    if not (len(argv) == 1 or (standby and len(argv) == 2)):
+        print("usage: python -m nodes.run '<NodeSpec JSON>' | --standby [CONTROL_ENDPOINT]  (normally started "
+              "by `mocap launch`)", file=sys.stderr)
         return 2
     _die_with_parent()
-    if argv[0] == "--standby":
+    if standby:
         # A spare process for fast restarts: imports and loads the kernels now, then waits for the spec
         # of the node it has to replace on stdin (the launcher's; python start-up alone takes ~1.5 s).
         from mocap_core.warmup import warm_up
 
         warm_up()
+        if len(argv) == 2:
+            _tell_launcher_warm(argv[1])
         line = sys.stdin.readline()
         if not line.strip():
             return 0

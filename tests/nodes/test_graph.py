@@ -116,3 +116,41 @@ def test_bad_launch_file_gives_clear_error(tmp_path):
     r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "launch", str(bad)], cwd=REPO,
                        capture_output=True, text=True, timeout=30)
     assert r.returncode == 2 and "bad params" in r.stderr
+
+
+def test_spare_process_reports_warm_on_the_control_socket(tmp_path):
+    # The launcher holds the sources back until its spare process has loaded the kernels: that
+    # loading would otherwise take a core from the graph's first second.
+    import subprocess
+    import sys
+
+    import zmq
+
+    from tests.conftest import REPO
+
+    ctx = zmq.Context.instance()
+    router = ctx.socket(zmq.ROUTER)
+    router.setsockopt(zmq.LINGER, 0)
+    endpoint = f"ipc://{tmp_path}/control"
+    router.bind(endpoint)
+    spare = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby", endpoint], cwd=REPO,
+                             stdin=subprocess.PIPE)
+    try:
+        assert router.poll(60_000), "the spare never said it was warm"
+        assert router.recv_multipart()[1] == b"warm"
+        assert spare.poll() is None  # and it still waits for the spec of a node to replace
+    finally:
+        spare.kill()
+        spare.wait()
+        router.close()
+
+
+def test_heartbeat_percentiles_match_numpy():
+    import numpy as np
+
+    from nodes.runtime import _percentiles
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 7, 1000):
+        values = rng.exponential(2.0, n)
+        assert np.allclose(_percentiles(values, (50, 95, 99)), np.percentile(values, [50, 95, 99]))
