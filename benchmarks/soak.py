@@ -69,10 +69,17 @@ def main():
     if "end" not in samples:
         return
     (start, t0), (end, t1) = samples["start"], samples["end"]
-    print(f"{'node':<12} {'RSS start MB':>13} {'RSS end MB':>11} {'CPU %':>6}  (of one core, between the two samples)")
+    frames_per_s = len(lat) / seconds
+    print(f"{'node':<12} {'RSS start MB':>13} {'RSS end MB':>11} {'CPU %':>6} {'CPU us/frame':>13}  "
+          "(CPU of one core between the two samples; per frame that came through)")
+    total = 0.0
     for node, (rss0, cpu0) in start.items():
         rss1, cpu1 = end.get(node, (float("nan"), float("nan")))
-        print(f"{node:<12} {rss0:>13.1f} {rss1:>11.1f} {100 * (cpu1 - cpu0) / (t1 - t0):>6.0f}")
+        share = (cpu1 - cpu0) / (t1 - t0)
+        total += share
+        print(f"{node:<12} {rss0:>13.1f} {rss1:>11.1f} {100 * share:>6.0f} {1e6 * share / frames_per_s:>13.0f}")
+    print(f"whole graph: {1e3 * total / frames_per_s:.1f} ms of CPU per frame, so {args.rate:.0f} Hz needs "
+          f"{total / frames_per_s * args.rate:.1f} cores at this cost (this machine: {psutil.cpu_count()})")
 
 
 if __name__ == "__main__":
