@@ -198,5 +198,12 @@ def _enc_hook(obj: Any) -> Any:
 _encoder = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
 
 
+def prepare(cls: type[BaseModel]) -> None:
+    """Build a model's decoder and packer now rather than on its first message (a few ms each)."""
+    if cls not in _COMPILED:
+        compile_model(cls)
+    packer(cls)
+
+
 def fast_encode(msg: BaseModel) -> bytes:
     return _encoder.encode(packer(type(msg))(msg))

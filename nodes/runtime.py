@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict
 
 from messages import DecodeError, Heartbeat, Latency, Message, decode, encode
 from messages.codec import MAX_MESSAGE_BYTES
+from messages.fastpath import prepare
 from nodes.spec import NodeSpec
 
 HEARTBEAT_PERIOD_S = 1.0
@@ -129,6 +130,8 @@ class NodeContext:
         self.pub: zmq.Socket | None = None
         self.sub: zmq.Socket | None = None
         self._subscriptions: collections.Counter[bytes] = collections.Counter()
+        for cls in {*self.subscribes.values(), *self.publishes.values(), Heartbeat}:
+            prepare(cls)  # the first frame through a node should cost what every other one does
 
     # -- sockets ---------------------------------------------------------------------------------
     def open(self) -> None:
