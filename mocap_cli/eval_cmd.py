@@ -6,12 +6,14 @@ import json
 import logging
 import time
 from pathlib import Path
+from typing import get_args
 
 from tqdm import tqdm
 
 from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, localize_take, reacquisition_jump,
                                     worst_case_timing)
-from mocap_core.gapfill import BEYOND_THESIS
+from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
+from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
@@ -56,18 +58,12 @@ def add_parser(sub) -> None:
                    help="hide the markers that define the joint, or the localized joint (the thesis's way)")
     g.add_argument("--report", default="reports/gaps", help="directory for gaps.md, gaps.csv and the plots")
     g.add_argument("--no-plots", action="store_true")
-    g.add_argument("--swivel", action="store_true",
-                   help="beyond the thesis: missing joints between two located ones from bone lengths and the "
-                        "swivel angle carried in the parent's frame")
-    g.add_argument("--segment-carry", action="store_true",
-                   help="beyond the thesis: a lost ankle moves with its still-tracked foot (heel and toe markers), a "
-                        "lost hand or toe with the last tracked bone before it")
-    g.add_argument("--hips-lost", choices=["hold", "fit", "missing"], default="hold",
-                   help="every hip marker lost (--remove pelvis): hold the last ones (the thesis), or, beyond "
-                        "the thesis, fit them to the trunk and knee markers")
+    g.add_argument("--swivel", action="store_true", help=BEYOND_THESIS_HELP["swivel"])
+    g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
+    g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
+                   help=f"(with --remove pelvis) {WHEN_LOST_HELP}")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
-                   help="beyond the thesis: close the gap to returning markers by at most M metres a frame "
-                        "(0 = the thesis's method: jump)")
+                   help=BEYOND_THESIS_HELP["reacquire_step_m"])
     g.set_defaults(func=run_gaps)
 
     lt = esub.add_parser("latency", help="end-to-end latency of the full graph fed by the QTM emulator",

@@ -47,6 +47,15 @@ LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
 # The gap-filling options beyond the thesis, as the studio launch files, `mocap solve` and
 # `mocap eval timing --beyond` use them (README "Results").
 BEYOND_THESIS = {"swivel": True, "segment_carry": True, "reacquire_step_m": 0.01}
+# What each of them does, said once for the node's params and `mocap eval gaps --help`.
+BEYOND_THESIS_HELP = {
+    "swivel": "beyond the thesis: missing joints between two located ones from bone lengths and the swivel "
+              "angle carried in the next joint's or the limb parent's frame",
+    "segment_carry": "beyond the thesis: a lost ankle moves with its still-tracked foot (heel and toe markers), "
+                     "a lost hand or toe with the last tracked bone before it",
+    "reacquire_step_m": "beyond the thesis: close the gap to returning markers by at most this many metres a "
+                        "frame (0 = the thesis's method: jump)",
+}
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
 CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 

@@ -39,6 +39,8 @@ ANCHOR_INDEX = np.array([LANDMARK_INDEX[n] for n in ANCHOR_LANDMARKS])
 ANCHOR_WEIGHTS = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.25, 0.25])
 MIN_SPREAD_M = 0.05  # the anchors seen must span a plane at least this wide
 WhenLost = Literal["hold", "fit", "missing"]
+WHEN_LOST_HELP = ("every hip marker lost: hold the last ones (the thesis), fit them to the trunk and knee markers "
+                  "(beyond the thesis), or leave the pelvis missing")
 
 
 @dataclass

@@ -11,7 +11,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
-from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, HipInterpolator, WhenLost
+from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
 from mocap_core.profiles import LANDMARKS, load_profile
 from nodes.runtime import Node
 
@@ -20,8 +20,7 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     profile: str = Field(description="marker-set profile name (profiles/) or YAML path")
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
-    when_lost: WhenLost = Field("hold", description="every hip marker lost: hold the last ones (the thesis), fit "
-                                "them to the trunk and knee markers (beyond the thesis), or leave the pelvis missing")
+    when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
 
 
 class HipInterpolation(Node):

@@ -12,7 +12,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import LimbSolution, SkeletonFrame
-from mocap_core.gapfill import LIMB_CHAINS, LimbFiller
+from mocap_core.gapfill import BEYOND_THESIS_HELP, LIMB_CHAINS, LimbFiller
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
@@ -29,12 +29,9 @@ class Params(BaseModel):
     constraints_file: str | None = None
     max_iterations: int = Field(140, ge=1)
     stop_distance_m: float = Field(0.01, gt=0)
-    swivel: bool = Field(False, description="beyond the thesis: one missing joint from bone lengths and the "
-                         "swivel angle carried in the parent's frame")
-    segment_carry: bool = Field(False, description="beyond the thesis: a lost ankle moves with its still-tracked "
-                                "foot (heel and toe markers)")
-    reacquire_step_m: float = Field(0.0, ge=0, description="beyond the thesis: largest per-frame move while "
-                                    "blending to returning markers; 0 = jump, as the thesis did")
+    swivel: bool = Field(False, description=BEYOND_THESIS_HELP["swivel"])
+    segment_carry: bool = Field(False, description=BEYOND_THESIS_HELP["segment_carry"])
+    reacquire_step_m: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["reacquire_step_m"])
 
 
 class IkGapfill(Node):

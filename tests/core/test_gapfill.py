@@ -25,16 +25,21 @@ def localized(lm, prof):
     return loc.positions, loc.frames, loc.status
 
 
+def filled(lm, prof, filler):
+    """Localize the landmarks and fill every frame's gaps with ``filler`` (a GapFiller or LimbFiller)."""
+    pos, frames, status = localized(lm, prof)
+    for f in range(len(pos)):
+        filler.fill(pos[f], frames[f], status[f])
+    return pos, frames, status
+
+
 @pytest.mark.parametrize("solver", sorted(SOLVERS))
 def test_hidden_elbow_is_estimated_near_the_truth(walk, solver):
     lm, prof = walk
     truth, _, _ = localized(lm, prof)
     hidden = lm.copy()
     hidden[100:, [LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]]] = np.nan
-    pos, frames, status = localized(hidden, prof)
-    filler = GapFiller(solver)
-    for f in range(len(pos)):
-        filler.fill(pos[f], frames[f], status[f])
+    pos, frames, status = filled(hidden, prof, GapFiller(solver))
     e = INDEX["elbow_l"]
     assert (status[:100, e] == Status.LOCATED).all() and (status[100:, e] == Status.ESTIMATED).all()
     err = np.linalg.norm(pos[100:, e] - truth[100:, e], axis=1)
@@ -50,10 +55,7 @@ def test_missing_end_effector_is_held_relative_to_its_parent(walk):
     lm, prof = walk
     hidden = lm.copy()
     hidden[150:, LANDMARK_INDEX["R_HM2"]] = np.nan
-    pos, frames, status = localized(hidden, prof)
-    filler = LimbFiller("right_arm")
-    for f in range(len(pos)):
-        filler.fill(pos[f], frames[f], status[f])
+    pos, frames, status = filled(hidden, prof, LimbFiller("right_arm"))
     h, w = INDEX["hand_r"], INDEX["wrist_r"]
     assert (status[150:, h] == Status.HELD).all()
     # the hand keeps its offset in the frame of the wrist's parent chain: constant distance to the wrist
@@ -67,10 +69,7 @@ def test_nothing_is_invented_before_the_limb_was_seen_whole(walk):
     hidden[:50, LANDMARK_INDEX["L_FLE"]] = np.nan
     hidden[:50, LANDMARK_INDEX["L_FME"]] = np.nan
     hidden[:50, LANDMARK_INDEX["L_TTC"]] = np.nan
-    pos, frames, status = localized(hidden, prof)
-    filler = LimbFiller("left_leg")
-    for f in range(len(pos)):
-        filler.fill(pos[f], frames[f], status[f])
+    pos, frames, status = filled(hidden, prof, LimbFiller("left_leg"))
     assert (status[:50, INDEX["knee_l"]] == Status.MISSING).all()
     assert (status[50:, INDEX["knee_l"]] == Status.LOCATED).all()
 
@@ -82,10 +81,7 @@ def test_reacquisition_blend_bounds_the_per_frame_move(walk):
     hidden[100:200, [LANDMARK_INDEX["L_FLE"], LANDMARK_INDEX["L_FME"], LANDMARK_INDEX["L_TTC"]]] = np.nan
     moves = {}
     for step in (0.0, 0.005):
-        pos, frames, status = localized(hidden, prof)
-        filler = LimbFiller("left_leg", "ccd", reacquire_step_m=step)
-        for f in range(len(pos)):
-            filler.fill(pos[f], frames[f], status[f])
+        pos, frames, status = filled(hidden, prof, LimbFiller("left_leg", "ccd", reacquire_step_m=step))
         k = INDEX["knee_l"]
         moves[step] = np.linalg.norm(np.diff(pos[195:215, k], axis=0), axis=1).max()
         truth, _, _ = localized(lm, prof)
@@ -104,10 +100,7 @@ def test_swivel_option_beats_the_thesis_method_on_a_walk(walk):
     hidden[60:, [LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]]] = np.nan
     err = {}
     for swivel in (False, True):
-        pos, frames, status = localized(hidden, prof)
-        filler = GapFiller("ccd", swivel=swivel)
-        for f in range(len(pos)):
-            filler.fill(pos[f], frames[f], status[f])
+        pos, frames, status = filled(hidden, prof, GapFiller("ccd", swivel=swivel))
         e = INDEX["elbow_l"]
         assert (status[60:, e] == Status.ESTIMATED).all()
         err[swivel] = np.linalg.norm(pos[60:, e] - truth[60:, e], axis=1)
@@ -149,10 +142,7 @@ def test_knee_and_ankle_lost_together_beyond_the_thesis(walk):
     hidden[60:200, [LANDMARK_INDEX[n] for n in ("L_FLE", "L_FME", "L_TTC", "L_FAL", "L_TAM")]] = np.nan
     err = {}
     for beyond in (False, True):
-        pos, frames, status = localized(hidden, prof)
-        filler = GapFiller("ccd", swivel=beyond, segment_carry=beyond)
-        for f in range(len(pos)):
-            filler.fill(pos[f], frames[f], status[f])
+        pos, frames, status = filled(hidden, prof, GapFiller("ccd", swivel=beyond, segment_carry=beyond))
         k, a = INDEX["knee_l"], INDEX["ankle_l"]
         assert (status[60:200, [k, a]] == Status.ESTIMATED).all()
         err[beyond] = np.linalg.norm(pos[60:200][:, [k, a]] - truth[60:200][:, [k, a]], axis=-1).mean(axis=0)
@@ -190,10 +180,7 @@ def test_lost_hand_moves_with_the_forearm(walk):
     hidden[60:250, LANDMARK_INDEX["L_HM2"]] = np.nan
     err = {}
     for carry in (False, True):
-        pos, frames, status = localized(hidden, prof)
-        filler = GapFiller("ccd", segment_carry=carry)
-        for f in range(len(pos)):
-            filler.fill(pos[f], frames[f], status[f])
+        pos, frames, status = filled(hidden, prof, GapFiller("ccd", segment_carry=carry))
         h = INDEX["hand_l"]
         assert (status[60:250, h] == Status.HELD).all() and np.isfinite(frames[60:250, INDEX["wrist_l"]]).all()
         err[carry] = np.linalg.norm(pos[60:250, h] - truth[60:250, h], axis=1)
