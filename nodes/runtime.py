@@ -27,7 +27,7 @@ import numpy as np
 import zmq
 from pydantic import BaseModel, ConfigDict
 
-from messages import DecodeError, Heartbeat, Latency, Message, decode, encode
+from messages import ALL_MESSAGES, DecodeError, Heartbeat, Latency, Message, decode, encode
 from messages.codec import MAX_MESSAGE_BYTES
 from messages.fastpath import prepare
 from nodes.spec import NodeSpec
@@ -130,7 +130,7 @@ class NodeContext:
         self.pub: zmq.Socket | None = None
         self.sub: zmq.Socket | None = None
         self._subscriptions: collections.Counter[bytes] = collections.Counter()
-        for cls in {*self.subscribes.values(), *self.publishes.values(), Heartbeat}:
+        for cls in ALL_MESSAGES:  # (a node typed `Message`, like the recorder, may get any of them)
             prepare(cls)  # the first frame through a node should cost what every other one does
 
     # -- sockets ---------------------------------------------------------------------------------
