@@ -1,8 +1,8 @@
 """Records topics of the graph into an MCAP bag (the in-graph twin of `mocap bag record`).
 
 As a node it is wired by the launcher like any subscriber, so sources wait for it: nothing is
-lost at start-up. SIGINT/SIGTERM finish the file (LINGER stays default on its socket so queued
-frames are drained first); after SIGKILL everything but the last chunk is readable.
+lost at start-up. SIGINT/SIGTERM finish the file after the frames already queued for it are
+written (``drain_on_stop``); after SIGKILL everything but the last chunk is readable.
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ class Params(BaseModel):
 class Recorder(Node):
     kind = "recorder"
     Params = Params
+    drain_on_stop = True  # frames already queued when the launcher stops the graph still reach the file
 
     @classmethod
     def inputs(cls, params):

@@ -11,7 +11,10 @@ writes (``publishes``), and handlers. The runtime owns the sockets and the loop:
 - a malformed or foreign message is counted, logged with topic and reason, and skipped;
 - a 1 Hz :class:`~messages.Heartbeat` on ``diagnostics`` with rates, latency percentiles
   (from the header's entry time), drops (sequence gaps per publisher) and error counts;
-- SIGINT/SIGTERM end the loop; sockets close with LINGER 0.
+- SIGINT/SIGTERM end the loop; sockets close with LINGER 0, except that a source that finished
+  flushes what it already sent (at most FLUSH_S), and a node with ``drain_on_stop`` (the recorder)
+  handles what is already queued for it before it tears down: a last frame is not lost to a race
+  with ZeroMQ's I/O thread.
 """
 from __future__ import annotations
 
@@ -33,6 +36,8 @@ from messages.fastpath import prepare
 from nodes.spec import NodeSpec
 
 HEARTBEAT_PERIOD_S = 1.0
+FLUSH_S = 1.0   # a finished source's last frames still go out
+DRAIN_S = 0.5   # a drain_on_stop node's queued frames still get handled
 DIAGNOSTICS = "diagnostics"
 # Plain ints: combining pyzmq's enum flags costs microseconds per call on the hot path.
 _NOBLOCK, _MORE, _POLLIN = int(zmq.NOBLOCK), int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.POLLIN)
@@ -51,6 +56,7 @@ class Node:
     publishes: ClassVar[dict[str, type[Message]]] = {}
     is_source: ClassVar[bool] = False                     # sources wait for the launcher's "start"
     timer_period_s: ClassVar[float | None] = None         # call on_timer() this often (e.g. join timeouts)
+    drain_on_stop: ClassVar[bool] = False                 # handle frames already queued when stopped
 
     @classmethod
     def inputs(cls, params: BaseModel) -> dict[str, type[Message]]:
@@ -117,7 +123,8 @@ class NodeContext:
         self.subscribes = node_cls.inputs(params)
         self.publishes = node_cls.outputs(params)
         self.log = logging.getLogger(f"mocap.{spec.id}")
-        self.zctx = zctx or zmq.Context.instance()
+        self._own_zctx = zctx is None
+        self.zctx = zctx or zmq.Context()
         self.publisher_id = spec.id
         self._seq: dict[str, int] = collections.defaultdict(int)
         self._pub_stats: dict[str, _TopicStats] = collections.defaultdict(_TopicStats)
@@ -161,12 +168,29 @@ class NodeContext:
             for endpoint in spec.sub_endpoints.get(wire, []):
                 self.sub.connect(endpoint)
 
-    def close(self) -> None:
-        for s in (self.pub, self.sub):
-            if s is not None:
-                s.close(linger=0)
+    def close(self, flush_s: float = 0.0) -> None:
+        """Close the sockets; with ``flush_s``, first let the I/O thread send what was published."""
+        if self.sub is not None:
+            self.sub.close(linger=0)
+        if self.pub is not None:
+            self.pub.close(linger=int(flush_s * 1000))
         if getattr(self, "authenticator", None) is not None:
             self.authenticator.stop()
+        if flush_s and self._own_zctx:
+            self.zctx.term()  # returns once queued messages are out, or after the linger
+
+    def drain(self, handle, limit_s: float) -> int:
+        """Pass frames already queued on the SUB socket to ``handle`` (at most ``limit_s``)."""
+        n, end = 0, time.monotonic() + limit_s
+        while time.monotonic() < end:
+            try:
+                handle(self.sub.recv_multipart(_NOBLOCK))
+            except zmq.Again:
+                if not self.sub.poll(20):  # nothing for 20 ms: what was in flight has arrived
+                    break
+                continue
+            n += 1
+        return n
 
     def read_subscriptions(self) -> None:
         """Drain XPUB subscription notices (b'\\x01topic' / b'\\x00topic')."""
@@ -417,6 +441,10 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
         ctx.log.exception("node failed: %s", e)
         code = 1
     finally:
+        if node_cls.drain_on_stop and code == 0:
+            n = ctx.drain(lambda frames: _handle(ctx, node, frames), DRAIN_S)
+            if n:
+                ctx.log.info("handled %d queued frames before stopping", n)
         try:
             node.teardown()
         except Exception as e:
@@ -427,7 +455,7 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
             ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(final, started_at))))
         if control is not None:
             control.close(linger=0)
-        ctx.close()
+        ctx.close(flush_s=FLUSH_S if finished else 0.0)
     return code
 
 

@@ -3,6 +3,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -86,6 +87,32 @@ nodes:
         wait_for(lambda: "exited with code" in g.log() or "died" in g.log(), 10, "the launcher to notice")
     frames = [decode(m.data, m.topic).header.frame for m in read_bag(bag)]
     assert len(frames) > 100 and frames == list(range(len(frames)))
+
+
+def test_a_finished_source_still_delivers_its_last_frames_to_a_slow_subscriber(tmp_path):
+    """A source that ends must not drop what it already sent but ZeroMQ has not yet delivered.
+
+    The recorder is frozen (SIGSTOP) while the source sends everything: more than the socket buffers
+    hold, so the source's last frames are still queued in it when it finishes. They must arrive
+    once the recorder runs again (within the source's flush time)."""
+    bag = tmp_path / "slow.mcap"
+    graph = f"""
+nodes:
+  - {{id: src, kind: synthetic_source, params: {{rate_hz: 1000, frames: 400, markers: 5}}}}
+  - {{id: rec, kind: recorder, respawn: false, params: {{path: {bag}, topics: [markers/raw]}}}}
+"""
+    with launched(tmp_path, graph) as g:
+        wait_for(lambda: "starting sources" in g.log(), 30, "the sources to start")
+        rec = g.node_pids()["rec"]
+        os.kill(rec, signal.SIGSTOP)
+        try:
+            wait_for(lambda: "mocap.src: source finished" in g.log(), 30, "the source to send everything")
+            time.sleep(0.2)
+        finally:
+            os.kill(rec, signal.SIGCONT)
+        wait_for(lambda: "source src finished" in g.log(), 10, "the source process to exit")
+    frames = [decode(m.data, m.topic).header.frame for m in read_bag(bag)]
+    assert frames == list(range(400)), g.log()
 
 
 def test_missing_corrupt_and_foreign_files_give_clear_errors(tmp_path):
