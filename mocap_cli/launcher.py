@@ -159,6 +159,18 @@ class Launcher:
         })
 
     def start(self) -> None:
+        from mocap_core.warmup import compile_kernels, kernels_cached
+
+        if not kernels_cached():  # else every node process would compile the same kernels at once
+            log.info("compiling the numba kernels for this checkout, once (1-2 minutes on 2 cores)...")
+            try:
+                log.info("numba kernels compiled and cached in %.0f s", compile_kernels())
+            except subprocess.CalledProcessError as e:
+                if self.stop_requested:  # Ctrl-C during the compile
+                    return
+                raise LaunchError(f"compiling the numba kernels failed (exit {e.returncode}); "
+                                  "`python -m mocap_core.warmup` shows why") from None
+            self.t0 = time.monotonic()  # readiness and --duration count from the graph's start
         for p in self.procs:
             self._spawn(p)
         self._spawn_standby()

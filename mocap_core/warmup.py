@@ -2,25 +2,45 @@
 
 Nodes call this in setup(), before they report ready; offline commands call it once up front.
 Loading from the on-disk cache takes well under a second; the very first compile on a machine
-takes about a minute.
+takes one to two minutes. The launcher compiles once, up front, when the cache is not known to be
+warm (``kernels_cached``): otherwise every node process of a graph would compile the same kernels
+at the same time on the same cores (a first `make demo` took 8.5 minutes that way, not 2).
+
+    python -m mocap_core.warmup     # compile now (two processes in parallel), then load everything
 """
 from __future__ import annotations
 
+import hashlib
+import os
+import subprocess
+import sys
+import time
+from importlib.metadata import version
+from pathlib import Path
+
 import numpy as np
 
+PACKAGE = Path(__file__).resolve().parent
+# Where "this checkout's kernels are compiled" is remembered (next to numba's own cache files).
+STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
+PARTS = ("localization", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")  # every solver (a test checks)
 
-def warm_up() -> None:
+
+def warm_up(parts: tuple[str, ...] = PARTS) -> None:
     from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
-    from mocap_core.ik.solvers import SOLVERS
     from mocap_core.localization import Localizer
     from mocap_core.profiles import LANDMARKS
     from mocap_core.skeleton import N_JOINTS, Status
 
-    loc = Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
-    quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
-    # one solve per solver, on a chain with a missing middle joint
-    for solver, options in [(s, {}) for s in SOLVERS] + [("ccd", BEYOND_THESIS)]:  # the analytic kernels too
+    if "localization" in parts:
+        Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
+        quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
+    # one solve per solver, on a chain with a missing middle joint; "beyond": the analytic kernels
+    for part in parts:
+        if part == "localization":
+            continue
+        solver, options = ("ccd", BEYOND_THESIS) if part == "beyond" else (part, {})
         filler = LimbFiller("left_leg", solver, **options)
         pos = np.zeros((N_JOINTS, 3))
         frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))
@@ -33,4 +53,52 @@ def warm_up() -> None:
         filler.fill(pos, frames, status)
         status[filler.joints[1:]] = Status.LOCATED
         filler.fill(pos, frames, status)
-    del loc
+    if tuple(parts) == PARTS:
+        _write_stamp()
+
+
+def fingerprint() -> str:
+    """The kernel sources (every module with cached numba code), numba's and Python's versions."""
+    h = hashlib.sha256(f"{version('numba')} {sys.version}".encode())
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_bytes()
+        if b"cache=True" in text:
+            h.update(path.relative_to(PACKAGE).as_posix().encode() + b"\0" + text)
+    return h.hexdigest()
+
+
+def kernels_cached() -> bool:
+    try:
+        return STAMP.read_text() == fingerprint()
+    except OSError:
+        return False
+
+
+def _write_stamp() -> None:
+    try:
+        STAMP.parent.mkdir(parents=True, exist_ok=True)
+        STAMP.write_text(fingerprint())
+    except OSError:
+        pass  # a read-only checkout: the launcher will just compile (or load) up front each time
+
+
+def compile_kernels(workers: int | None = None) -> float:
+    """Compile every kernel into the on-disk cache, the parts spread over the cores; returns seconds.
+
+    The parts share helper kernels, so some are compiled twice; two processes saving the same
+    cache index at once may lose an entry, which the final pass (one process) puts back.
+    """
+    started = time.monotonic()
+    workers = max(1, min(workers or os.cpu_count() or 1, len(PARTS)))
+    groups = [PARTS[i::workers] for i in range(workers)]
+    procs = [subprocess.Popen([sys.executable, "-c", f"from mocap_core.warmup import warm_up; warm_up({g!r})"])
+             for g in groups]
+    for p in procs:
+        if p.wait():
+            raise subprocess.CalledProcessError(p.returncode, p.args)
+    subprocess.run([sys.executable, "-c", "from mocap_core.warmup import warm_up; warm_up()"], check=True)
+    return time.monotonic() - started
+
+
+if __name__ == "__main__":
+    print(f"numba kernels compiled and cached in {compile_kernels():.0f} s")
