@@ -23,13 +23,11 @@ def pytest_sessionstart(session):
     it (often in a subprocess), it ate that test's timeout. The compiled code is cached on disk, so
     every node and CLI process the tests start afterwards only loads it.
     """
-    from mocap_core.warmup import warm_up
+    from mocap_core.warmup import compile_kernels, kernels_cached, warm_up
 
-    started = time.monotonic()
-    warm_up()
-    elapsed = time.monotonic() - started
-    if elapsed > 5:
-        print(f"\nnumba kernels compiled and cached in {elapsed:.0f} s (first run on this checkout only)")
+    if not kernels_cached():  # in two processes, as the launcher does
+        print(f"\nnumba kernels compiled and cached in {compile_kernels():.0f} s (first run on this checkout only)")
+    warm_up()  # this process loads them too (in-process tests)
 
 
 def data_file(name: str) -> Path:
