@@ -17,6 +17,7 @@ class Params(BaseModel):
 
 class FrameLog(Node):
     kind = "frame_log"
+    drain_on_stop = True  # a sink: frames already queued when the graph stops still reach the file
     Params = Params
     subscribes = {"in": Message}  # any schema: the codec's check is relaxed for the base class
     timer_period_s = 0.1           # flush ten times a second rather than one write call per message
