@@ -27,34 +27,38 @@ PARTS = ("localization", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")
 
 
 def warm_up(parts: tuple[str, ...] = PARTS) -> None:
+    for part in parts:
+        _warm(part)
+    if tuple(parts) == PARTS:
+        _write_stamp()
+
+
+def _warm(part: str) -> None:
+    """Run one part's kernels once: localization, or one solve on a chain with a missing middle
+    joint (a solver by name; "beyond": CCD with the analytic fills of BEYOND_THESIS)."""
     from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.localization import Localizer
     from mocap_core.profiles import LANDMARKS
     from mocap_core.skeleton import N_JOINTS, Status
 
-    if "localization" in parts:
+    if part == "localization":
         Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
         quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
-    # one solve per solver, on a chain with a missing middle joint; "beyond": the analytic kernels
-    for part in parts:
-        if part == "localization":
-            continue
-        solver, options = ("ccd", BEYOND_THESIS) if part == "beyond" else (part, {})
-        filler = LimbFiller("left_leg", solver, **options)
-        pos = np.zeros((N_JOINTS, 3))
-        frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))
-        status = np.full(N_JOINTS, Status.LOCATED, np.uint8)
-        for k, j in enumerate(filler.joints):
-            pos[j] = [0.0, 0.1, 1.0 - 0.2 * k]
-        filler.fill(pos, frames, status)
-        status[filler.joints[1]] = Status.MISSING
-        pos[filler.joints[1]] = np.nan
-        filler.fill(pos, frames, status)
-        status[filler.joints[1:]] = Status.LOCATED
-        filler.fill(pos, frames, status)
-    if tuple(parts) == PARTS:
-        _write_stamp()
+        return
+    solver, options = ("ccd", BEYOND_THESIS) if part == "beyond" else (part, {})
+    filler = LimbFiller("left_leg", solver, **options)
+    pos = np.zeros((N_JOINTS, 3))
+    frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))
+    status = np.full(N_JOINTS, Status.LOCATED, np.uint8)
+    for k, j in enumerate(filler.joints):
+        pos[j] = [0.0, 0.1, 1.0 - 0.2 * k]
+    filler.fill(pos, frames, status)
+    status[filler.joints[1]] = Status.MISSING
+    pos[filler.joints[1]] = np.nan
+    filler.fill(pos, frames, status)
+    status[filler.joints[1:]] = Status.LOCATED
+    filler.fill(pos, frames, status)
 
 
 def fingerprint() -> str:

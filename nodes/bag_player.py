@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import Message, decode
 from nodes.bags import bag_info, read_bag
 from nodes.lockstep import Lockstep
-from nodes.runtime import Node
+from nodes.runtime import Node, percentiles
 
 
 class Params(BaseModel):
@@ -101,7 +103,6 @@ class BagPlayer(Node):
 
     def teardown(self) -> None:
         if self.late_s:
-            late_ms = sorted(x * 1000 for x in self.late_s)
-            pick = lambda q: late_ms[min(len(late_ms) - 1, int(q * len(late_ms)))]  # noqa: E731
+            p50, p99, top = percentiles(np.array(self.late_s) * 1000, (50, 99, 100))
             self.log.info("timed replay of %d messages: sent late by p50 %.3f ms, p99 %.3f ms, max %.3f ms",
-                          len(late_ms), pick(0.5), pick(0.99), late_ms[-1])
+                          len(self.late_s), p50, p99, top)

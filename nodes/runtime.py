@@ -296,7 +296,7 @@ class NodeContext:
         self._latency_ns = []
         latency = Latency()
         if lat.size:
-            p50, p95, p99 = _percentiles(lat, (50, 95, 99))
+            p50, p95, p99 = percentiles(lat, (50, 95, 99))
             latency = Latency(p50_ms=p50, p95_ms=p95, p99_ms=p99, max_ms=float(lat.max()), samples=int(lat.size))
         rates = {t: s.rate(now) for t, s in {**self._sub_stats, **self._pub_stats}.items()}
         return Heartbeat(
@@ -311,7 +311,7 @@ class NodeContext:
         )
 
 
-def _percentiles(values: np.ndarray, qs: tuple[float, ...]) -> list[float]:
+def percentiles(values, qs: tuple[float, ...]) -> list[float]:
     """np.percentile's default (linear) percentiles. np.percentile itself lazily imports half of
     numpy on its first call: a 35 ms stall of every node's message loop a second into each run."""
     s = np.sort(values)
