@@ -1,7 +1,9 @@
 """Soak (issue 10; not run in CI): the full graph fed by the QTM emulator at 1000 Hz for 10 minutes.
 Reports drops, throughput and each node's RSS at the start and the end (memory must stay flat).
 
-    python benchmarks/soak.py [--minutes 10] [--rate 1000]
+    python benchmarks/soak.py [--minutes 10] [--rate 1000] [--composed]
+
+--composed runs the solving nodes in one container process (launch/studio_composed.yaml's layout).
 """
 from __future__ import annotations
 
@@ -27,16 +29,18 @@ TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
 
 
 def usage(graph: str) -> dict[str, tuple[float, float]]:
-    """Per node: (RSS in MB, CPU seconds used so far)."""
+    """Per process (a node, or a container of nodes): (RSS in MB, CPU seconds used so far)."""
     data = json.loads(registry_path(graph).read_text())
     out = {}
     for n in data["nodes"]:
+        if n["process"] in out:
+            continue
         try:
             p = psutil.Process(n["pid"])
             cpu = p.cpu_times()
-            out[n["id"]] = (p.memory_info().rss / 2**20, cpu.user + cpu.system)
+            out[n["process"]] = (p.memory_info().rss / 2**20, cpu.user + cpu.system)
         except (psutil.Error, TypeError):
-            out[n["id"]] = (float("nan"), float("nan"))
+            out[n["process"]] = (float("nan"), float("nan"))
     return out
 
 
@@ -44,10 +48,11 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--minutes", type=float, default=10)
     ap.add_argument("--rate", type=float, default=1000)
+    ap.add_argument("--composed", action="store_true", help="the solving nodes in one container process")
     args = ap.parse_args()
     sim, port = start_emulator(str(TAKE), "--rate", str(args.rate), "--loop", cwd=str(REPO))
     out = Path(tempfile.mkdtemp()) / "solved.csv"
-    lf = live_graph(port, "cmu41", out, "soak")
+    lf = live_graph(port, "cmu41", out, "soak", container="core" if args.composed else None)
     seconds = args.minutes * 60
     samples = {}
 
@@ -70,7 +75,7 @@ def main():
         return
     (start, t0), (end, t1) = samples["start"], samples["end"]
     frames_per_s = len(lat) / seconds
-    print(f"{'node':<12} {'RSS start MB':>13} {'RSS end MB':>11} {'CPU %':>6} {'CPU us/frame':>13}  "
+    print(f"{'process':<12} {'RSS start MB':>13} {'RSS end MB':>11} {'CPU %':>6} {'CPU us/frame':>13}  "
           "(CPU of one core between the two samples; per frame that came through)")
     total = 0.0
     for node, (rss0, cpu0) in start.items():

@@ -2,7 +2,8 @@
 
 1. Plan: resolve node kinds, validate their params, give each process a PUB endpoint, and for each
    topic work out who publishes it and how many subscribers each publisher must see.
-2. Start: spawn ``python -m nodes.run SPEC`` per process. Each node reports "ready" over the
+2. Start: spawn ``python -m nodes.run SPEC`` per process (a container's nodes share one process and get
+   ``[SPEC, ...]``; between themselves they talk over ``inproc://``). Each node reports "ready" over the
    control socket once its XPUB has seen all its expected subscribers; when every node is ready the
    sources get "start". No sleeps: a source cannot send before the graph is wired.
 3. Watch: a node that dies is restarted with exponential backoff (0.1 s doubling to 5 s; reset
@@ -30,7 +31,7 @@ import zmq
 from mocap_cli.graph_registry import registry_path, write_registry
 from mocap_cli.launch_file import LaunchError, LaunchFile
 from nodes.registry import UnknownKind, load_kind
-from nodes.runtime import DIAGNOSTICS
+from nodes.runtime import DIAGNOSTICS, inproc_endpoint
 from nodes.spec import NodeSpec
 
 log = logging.getLogger("mocap.launch")
@@ -41,19 +42,62 @@ BACKOFF_FIRST_S, BACKOFF_MAX_S, BACKOFF_RESET_S = 0.1, 5.0, 10.0
 
 @dataclass
 class Proc:
+    """One node of the plan: its spec and wiring, and whether it said "ready"."""
     spec: NodeSpec
     is_source: bool
     respawn: bool
+    container: str | None = None
+    ready: bool = False
+    identity: bytes | None = None
+    publishes: list[str] = field(default_factory=list)
+    subscribes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Process:
+    """One OS process: a node, or a container of nodes that share one loop."""
+    name: str
+    nodes: list[Proc]
     popen: subprocess.Popen | None = None
     started_at: float = 0.0
     restarts: int = 0
     failures_in_row: int = 0
     restart_at: float | None = None
-    ready: bool = False
     finished: bool = False
-    identity: bytes | None = None
-    publishes: list[str] = field(default_factory=list)
-    subscribes: list[str] = field(default_factory=list)
+
+    @property
+    def label(self) -> str:
+        if len(self.nodes) == 1 and self.nodes[0].container is None:
+            return f"node {self.name}"
+        return f"container {self.name} ({', '.join(n.spec.id for n in self.nodes)})"
+
+    @property
+    def is_source(self) -> bool:
+        return any(n.is_source for n in self.nodes)
+
+    @property
+    def respawn(self) -> bool:
+        return all(n.respawn for n in self.nodes)
+
+    def argv(self) -> str:
+        if len(self.nodes) == 1 and self.nodes[0].container is None:
+            return self.nodes[0].spec.model_dump_json()
+        return json.dumps([n.spec.model_dump(mode="json") for n in self.nodes])
+
+
+def group(procs: list[Proc]) -> list[Process]:
+    """Nodes to OS processes: one each, except that a container's nodes share one (in launch-file order)."""
+    out: list[Process] = []
+    by_container: dict[str, Process] = {}
+    for p in procs:
+        if p.container is None:
+            out.append(Process(name=p.spec.id, nodes=[p]))
+        elif p.container in by_container:
+            by_container[p.container].nodes.append(p)
+        else:
+            by_container[p.container] = Process(name=p.container, nodes=[p])
+            out.append(by_container[p.container])
+    return out
 
 
 def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
@@ -84,19 +128,30 @@ def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
                             replica=k, replicas=entry.replicas, hwm=entry.hwm, keep_last=entry.keep_last,
                             curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
                             else None)
-            procs.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn,
+            if entry.container and cls.is_source:
+                raise LaunchError(f"node {entry.id}: a source ends its process when it finishes, so it cannot "
+                                  f"be in container {entry.container!r}")
+            procs.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn, container=entry.container,
                               publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
                               subscribes=[spec.wire_topic(t) for t in inputs]))
     for sub in procs:
         for topic in sub.subscribes:
             pubs = [p for p in procs if topic in p.publishes and p is not sub]
-            sub.spec.sub_endpoints[topic] = [p.spec.pub_endpoint for p in pubs]
+            sub.spec.sub_endpoints[topic] = [_endpoint_for(sub, p) for p in pubs]
             for p in pubs:
                 p.spec.expected_subscribers[topic] = p.spec.expected_subscribers.get(topic, 0) + 1
     unfed = sorted({(p.spec.id, t) for p in procs for t in p.subscribes if not p.spec.sub_endpoints[t]})
     for node_id, topic in unfed:
         log.warning("node %s subscribes to %s but no node in the graph publishes it", node_id, topic)
     return procs
+
+
+def _endpoint_for(sub: Proc, pub: Proc) -> str:
+    """Where ``sub`` connects to reach ``pub``: inproc within a container, else the pub endpoint."""
+    if sub.container is not None and sub.container == pub.container:
+        pub.spec.inproc = True
+        return inproc_endpoint(pub.spec.id)
+    return pub.spec.pub_endpoint
 
 
 class Launcher:
@@ -109,6 +164,7 @@ class Launcher:
         else:
             self.control_endpoint = f"ipc://{self.sock_dir}/control"
         self.procs = plan(lf, self.sock_dir, self.control_endpoint)
+        self.processes = group(self.procs)
         self.zctx = zmq.Context()
         self.control = self.zctx.socket(zmq.ROUTER)
         self.control.setsockopt(zmq.LINGER, 0)
@@ -121,12 +177,14 @@ class Launcher:
         self.standby_warm = False
 
     # -- processes -----------------------------------------------------------------------------------
-    def _spawn(self, p: Proc) -> None:
-        p.popen = subprocess.Popen([sys.executable, "-m", "nodes.run", p.spec.model_dump_json()],
-                                   stdin=subprocess.DEVNULL)
+    def _spawn(self, p: Process) -> None:
+        p.popen = subprocess.Popen([sys.executable, "-m", "nodes.run", p.argv()], stdin=subprocess.DEVNULL)
+        self._started(p)
+
+    def _started(self, p: Process) -> None:
         p.started_at = time.monotonic()
-        p.ready = False
-        p.identity = None
+        for n in p.nodes:
+            n.ready, n.identity = False, None
 
     def _spawn_standby(self) -> None:
         """Keep one warm spare process: a restart hands it the dead node's spec instead of paying
@@ -135,13 +193,14 @@ class Launcher:
                                         stdin=subprocess.PIPE)
         self.standby_warm = False
 
-    def _respawn(self, p: Proc) -> None:
+    def _respawn(self, p: Process) -> None:
         spare, self.standby = self.standby, None
         if spare is not None and spare.poll() is None:
             try:
-                spare.stdin.write(p.spec.model_dump_json().encode() + b"\n")
+                spare.stdin.write(p.argv().encode() + b"\n")
                 spare.stdin.close()
-                p.popen, p.started_at, p.ready, p.identity = spare, time.monotonic(), False, None
+                p.popen = spare
+                self._started(p)
             except OSError:
                 self._spawn(p)
         else:
@@ -153,9 +212,9 @@ class Launcher:
             "name": self.lf.name, "launch_file": os.path.abspath(self.launch_path) if self.launch_path else "",
             "launcher_pid": os.getpid(), "control": self.control_endpoint,
             "curve_keys": str(Path(self.lf.transport.curve_keys).resolve()) if self.lf.transport.curve_keys else None,
-            "nodes": [{"id": p.spec.id, "kind": p.spec.kind, "pid": p.popen.pid if p.popen else None,
-                       "endpoint": p.spec.pub_endpoint, "publishes": p.publishes, "subscribes": p.subscribes,
-                       "restarts": p.restarts} for p in self.procs],
+            "nodes": [{"id": n.spec.id, "kind": n.spec.kind, "pid": p.popen.pid if p.popen else None,
+                       "endpoint": n.spec.pub_endpoint, "publishes": n.publishes, "subscribes": n.subscribes,
+                       "restarts": p.restarts, "process": p.name} for p in self.processes for n in p.nodes],
         })
 
     def start(self) -> None:
@@ -171,11 +230,11 @@ class Launcher:
                 raise LaunchError(f"compiling the numba kernels failed (exit {e.returncode}); "
                                   "`python -m mocap_core.warmup` shows why") from None
             self.t0 = time.monotonic()  # readiness and --duration count from the graph's start
-        for p in self.procs:
+        for p in self.processes:
             self._spawn(p)
         self._spawn_standby()
         self._write_registry()
-        log.info("graph %s: started %d node processes", self.lf.name, len(self.procs))
+        log.info("graph %s: started %d nodes in %d processes", self.lf.name, len(self.procs), len(self.processes))
 
     def _on_control(self) -> None:
         while True:
@@ -200,25 +259,25 @@ class Launcher:
     def _maybe_start(self, now: float) -> None:
         """Start the sources once every node is ready and the spare process has done its loading
         (it would otherwise take a core from the graph's first second: 10-70 ms stalls)."""
-        if self.graph_started or not all(p.ready or p.finished for p in self.procs):
+        if self.graph_started or not all(n.ready or p.finished for p in self.processes for n in p.nodes):
             return
         spare_busy = self.standby is not None and self.standby.poll() is None and not self.standby_warm
         if spare_busy and now - self.t0 < STANDBY_WAIT_S:
             return
         self.graph_started = True
         log.info("graph %s ready in %.0f ms: starting sources", self.lf.name, (now - self.t0) * 1000)
-        for p in self.procs:
-            if p.is_source and p.identity:
-                self.control.send_multipart([p.identity, b"start"])
+        for n in self.procs:
+            if n.is_source and n.identity:
+                self.control.send_multipart([n.identity, b"start"])
 
     def _watch(self, now: float) -> None:
-        for p in self.procs:
+        for p in self.processes:
             if p.popen is None:
                 if p.restart_at is not None and now >= p.restart_at:
                     p.restart_at = None
                     self._respawn(p)
                     self._write_registry()
-                    log.warning("restarted node %s (restart #%d, pid %d)", p.spec.id, p.restarts, p.popen.pid)
+                    log.warning("restarted %s (restart #%d, pid %d)", p.label, p.restarts, p.popen.pid)
                 continue
             code = p.popen.poll()
             if code is None:
@@ -226,10 +285,10 @@ class Launcher:
             p.popen = None
             if code == 0 and p.is_source:
                 p.finished = True
-                log.info("source %s finished", p.spec.id)
+                log.info("source %s finished", p.name)
                 continue
             if not p.respawn:
-                log.error("node %s exited with code %s; respawn is off", p.spec.id, code)
+                log.error("%s exited with code %s; respawn is off", p.label, code)
                 p.finished = True
                 continue
             if now - p.started_at > BACKOFF_RESET_S:
@@ -239,10 +298,10 @@ class Launcher:
             p.restarts += 1
             p.restart_at = now + delay
             how = f"signal {-code}" if code < 0 else f"code {code}"
-            log.warning("node %s died (%s); restarting in %.1f s", p.spec.id, how, delay)
+            log.warning("%s died (%s); restarting in %.1f s", p.label, how, delay)
 
     def sources_done(self) -> bool:
-        sources = [p for p in self.procs if p.is_source]
+        sources = [p for p in self.processes if p.is_source]
         return bool(sources) and all(p.finished for p in sources)
 
     def run(self, duration_s: float | None = None, until_done: bool = False, drain_s: float = 1.0) -> int:
@@ -278,7 +337,7 @@ class Launcher:
         if self.standby is not None and self.standby.poll() is None:
             self.standby.kill()  # holds no state
             self.standby.wait()
-        alive = [p for p in self.procs if p.popen is not None and p.popen.poll() is None]
+        alive = [p for p in self.processes if p.popen is not None and p.popen.poll() is None]
         for p in alive:
             p.popen.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + STOP_GRACE_S
@@ -286,7 +345,7 @@ class Launcher:
             try:
                 p.popen.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                log.warning("node %s (pid %d) did not stop within %.1f s of SIGTERM: killing it", p.spec.id,
+                log.warning("%s (pid %d) did not stop within %.1f s of SIGTERM: killing it", p.label,
                             p.popen.pid, STOP_GRACE_S)
                 p.popen.kill()
                 p.popen.wait()
@@ -297,10 +356,10 @@ class Launcher:
         log.info("graph %s stopped", self.lf.name)
 
     def status(self) -> list[dict]:
-        return [{"id": p.spec.id, "pid": p.popen.pid if p.popen else None, "restarts": p.restarts,
-                 "finished": p.finished} for p in self.procs]
+        return [{"id": n.spec.id, "process": p.name, "pid": p.popen.pid if p.popen else None,
+                 "restarts": p.restarts, "finished": p.finished} for p in self.processes for n in p.nodes]
 
 
 def dump_plan(lf: LaunchFile) -> str:
     procs = plan(lf, "/tmp/mocap-plan", "ipc:///tmp/mocap-plan/control")
-    return json.dumps([p.spec.model_dump() for p in procs], indent=2)
+    return json.dumps({p.name: [n.spec.model_dump() for n in p.nodes] for p in group(procs)}, indent=2)

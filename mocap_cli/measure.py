@@ -12,11 +12,15 @@ from mocap_cli.launch_file import LaunchFile, NodeEntry, load_launch_file
 REPO = Path(__file__).resolve().parents[1]
 
 
-def live_graph(port: int, profile: str, log_path: str | Path, name: str, up_axis: str = "z") -> LaunchFile:
-    """launch/qtm_studio.yaml pointed at the emulator, without the viewer and VMC, logging skeleton/solved."""
+def live_graph(port: int, profile: str, log_path: str | Path, name: str, up_axis: str = "z",
+               container: str | None = None) -> LaunchFile:
+    """launch/qtm_studio.yaml pointed at the emulator, without the viewer and VMC, logging skeleton/solved.
+    With ``container``, the solving nodes (all but the ingest and the log) share that one process."""
     lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [
         f"qtm.port={port}", f"hips.profile={profile}", f"localize.profile={profile}", f"retarget.up_axis={up_axis}"])
     lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]
+    for n in lf.nodes:
+        n.container = container if n.kind != "qtm_ingest" else None
     lf.nodes.append(NodeEntry(id="log", kind="frame_log", params={"path": str(log_path)},
                               remaps={"in": "skeleton/solved"}))
     lf.name = name

@@ -1,14 +1,16 @@
-"""Process entry point of one node: ``python -m nodes.run '<NodeSpec JSON>'`` (the launcher's call)."""
+"""Process entry point of one node: ``python -m nodes.run '<NodeSpec JSON>'`` (the launcher's call), or of a
+container of several: ``python -m nodes.run '[<NodeSpec JSON>, ...]'``."""
 from __future__ import annotations
 
 import ctypes
+import json
 import logging
 import os
 import signal
 import sys
 
 from nodes.registry import load_kind
-from nodes.runtime import configure_logging, run_node
+from nodes.runtime import configure_logging, run_nodes
 from nodes.spec import NodeSpec
 
 
@@ -39,8 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     standby = bool(argv) and argv[0] == "--standby"
     if not (len(argv) == 1 or (standby and len(argv) == 2)):
-        print("usage: python -m nodes.run '<NodeSpec JSON>' | --standby [CONTROL_ENDPOINT]  (normally started "
-              "by `mocap launch`)", file=sys.stderr)
+        print("usage: python -m nodes.run '<NodeSpec JSON>' | '[<NodeSpec JSON>, ...]' | --standby [CONTROL_ENDPOINT]"
+              "  (normally started by `mocap launch`)", file=sys.stderr)
         return 2
     _die_with_parent()
     if standby:
@@ -55,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
         if not line.strip():
             return 0
         argv = [line]
-    spec = NodeSpec.model_validate_json(argv[0])
+    nodes = [(spec, load_kind(spec.kind)) for spec in parse_specs(argv[0])]
     configure_logging(os.environ.get("MOCAP_LOG_LEVEL", "INFO"))
     profile_dir = os.environ.get("MOCAP_PROFILE_DIR")
     if profile_dir:  # developers: one cProfile file per node, read with `python -m pstats FILE`
@@ -63,11 +65,19 @@ def main(argv: list[str] | None = None) -> int:
 
         profiler = cProfile.Profile()
         try:
-            return profiler.runcall(run_node, spec, load_kind(spec.kind))
+            return profiler.runcall(run_nodes, nodes)
         finally:
             os.makedirs(profile_dir, exist_ok=True)
-            profiler.dump_stats(os.path.join(profile_dir, f"{spec.id.replace('#', '_')}.prof"))
-    return run_node(spec, load_kind(spec.kind))
+            name = "+".join(spec.id for spec, _ in nodes).replace("#", "_")
+            profiler.dump_stats(os.path.join(profile_dir, f"{name}.prof"))
+    return run_nodes(nodes)
+
+
+def parse_specs(text: str) -> list[NodeSpec]:
+    """One spec (a JSON object) or a container's (a JSON list)."""
+    if text.lstrip().startswith("["):
+        return [NodeSpec.model_validate(d) for d in json.loads(text)]
+    return [NodeSpec.model_validate_json(text)]
 
 
 if __name__ == "__main__":

@@ -94,6 +94,10 @@ class Node:
         """Close files. Called once on shutdown, also after an error."""
 
 
+def inproc_endpoint(node_id: str) -> str:
+    return f"inproc://{node_id}"
+
+
 class _TopicStats:
     __slots__ = ("count", "drops", "last_seq", "last_frame", "lost_frames", "rate_mark")
 
@@ -156,6 +160,8 @@ class NodeContext:
             self.pub.setsockopt(zmq.SNDHWM, spec.hwm)
             self.pub.setsockopt(zmq.LINGER, 0)
             self.pub.bind(spec.bind_endpoint or spec.pub_endpoint)
+            if spec.inproc:  # nodes in the same container connect here: no I/O thread, no kernel
+                self.pub.bind(inproc_endpoint(spec.id))
         self.sub = self.zctx.socket(zmq.SUB)
         if spec.curve_keys:
             curve.secure_subscriber(self.sub, spec.curve_keys)
@@ -328,10 +334,140 @@ class _Stop(Exception):
     pass
 
 
+class NodeLoop:
+    """One node's share of a process's loop: its sockets, its source ticks, timer and heartbeat.
+
+    A process usually runs one node; a container (``container:`` in the launch file) runs several in
+    one loop, wired over ``inproc://`` sockets, which saves most of ZeroMQ's cross-process wake-ups."""
+
+    def __init__(self, spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None):
+        self.spec, self.node_cls = spec, node_cls
+        params = node_cls.Params.model_validate(spec.params)
+        self.ctx = ctx = NodeContext(spec, node_cls, zctx, params)
+        ctx.open()
+        self.node = node_cls(params, ctx)
+        self.control = None
+        if spec.control_endpoint:
+            self.control = ctx.zctx.socket(zmq.DEALER)
+            self.control.setsockopt(zmq.LINGER, 0)
+            self.control.connect(spec.control_endpoint)
+        self.started_at = self.next_heartbeat = self.next_tick = time.monotonic()
+        self.timer = node_cls.timer_period_s
+        self.next_timer = self.started_at + (self.timer or 0)
+        self.ready_sent = False
+        self.started = self.control is None  # without a launcher, run at once
+        self.finished = False
+
+    def sockets(self) -> list[zmq.Socket]:
+        return [s for s in (self.ctx.sub, self.ctx.pub, self.control) if s is not None]
+
+    def is_pure_source(self) -> bool:
+        return not self.ctx.subscribes and self.ctx.pub is not None
+
+    def wait_s(self, now: float) -> float:
+        """How long the process may block in poll before this node has something to do."""
+        if self.node_cls.is_source and self.started and not self.finished:
+            wait = max(0.0, self.next_tick - now)
+        else:
+            wait = 0.1
+        wait = min(wait, max(0.0, self.next_heartbeat - now), 0.1)
+        if self.timer:
+            wait = min(wait, max(0.0, self.next_timer - now))
+        return wait
+
+    def step(self, events: dict) -> bool:
+        """Do what is due; False once a source has finished."""
+        ctx, node, spec = self.ctx, self.node, self.spec
+        now = time.monotonic()
+        if not self.ready_sent and self.control is not None:
+            ctx.read_subscriptions()
+            if ctx.subscribers_connected():
+                self.control.send_multipart([b"ready", spec.id.encode()])
+                self.ready_sent = True
+                self.started = self.started or not self.node_cls.is_source  # only sources wait for "start"
+        if self.node_cls.is_source and self.started and now >= self.next_tick:
+            try:
+                delay = node.tick()
+            except Exception as e:  # a source error ends the source, not silently
+                ctx.handler_error("tick", e)
+                raise
+            if delay is None:
+                self.finished = True
+                ctx.log.info("source finished")
+                return False
+            self.next_tick = max(self.next_tick + delay, now - 0.05)  # keep cadence, never race to catch up
+        # Read the SUB socket whether or not poll named it: in a container, a frame an upstream node
+        # published a moment ago in this same pass is already here (inproc), so it goes on at once.
+        if ctx.subscribes:
+            self._read_sub()
+        if ctx.pub is not None and ctx.pub in events:
+            ctx.read_subscriptions()
+        if self.control is not None and self.control in events:
+            try:
+                while True:
+                    if self.control.recv_multipart(zmq.NOBLOCK)[0] == b"start":
+                        self.started = True
+                        self.next_tick = time.monotonic()
+            except zmq.Again:
+                pass
+        if self.timer and time.monotonic() >= self.next_timer:
+            self.next_timer = time.monotonic() + self.timer
+            try:
+                node.on_timer()
+            except Exception as e:
+                ctx.handler_error("timer", e)
+        if time.monotonic() >= self.next_heartbeat:
+            state = "running" if self.started else "waiting"
+            ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(state, self.started_at))))
+            self.next_heartbeat += HEARTBEAT_PERIOD_S
+        return True
+
+    def _read_sub(self) -> None:
+        ctx, node, sub = self.ctx, self.node, self.ctx.sub
+        batch_end = time.monotonic() + 0.02
+        newest: dict[bytes, list] = {}
+        for _ in range(1000):  # bounded batch (count and time): heartbeats and ticks still run
+            # Asking for EVENTS is far cheaper than the zmq.Again exception of an empty recv.
+            if not sub.getsockopt(zmq.EVENTS) & _POLLIN or time.monotonic() > batch_end:
+                break
+            frames = sub.recv_multipart(_NOBLOCK)
+            if self.spec.keep_last and len(frames) == 2:
+                if frames[0] in newest:
+                    ctx.skipped(frames[0])  # keep-last: an older frame nobody will see
+                newest[frames[0]] = frames
+                continue
+            _handle(ctx, node, frames)
+        for frames in newest.values():
+            _handle(ctx, node, frames)
+
+    def finish(self, code: int) -> int:
+        """Drain (if asked), tear down, say goodbye on diagnostics, close. Returns the exit code."""
+        ctx = self.ctx
+        if self.node_cls.drain_on_stop and code == 0:
+            n = ctx.drain(lambda frames: _handle(ctx, self.node, frames), DRAIN_S)
+            if n:
+                ctx.log.info("handled %d queued frames before stopping", n)
+        try:
+            self.node.teardown()
+        except Exception as e:
+            ctx.log.exception("teardown failed: %s", e)
+            code = 1
+        if ctx.pub is not None:
+            final = "finished" if self.finished else ("error" if code else "stopping")
+            ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(final, self.started_at))))
+        if self.control is not None:
+            self.control.close(linger=0)
+        ctx.close(flush_s=FLUSH_S if self.finished else 0.0)
+        return code
+
+
 def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None) -> int:
     """Run one node until SIGINT/SIGTERM, or until a source finishes. Returns the exit code."""
-    params = node_cls.Params.model_validate(spec.params)
-    ctx = NodeContext(spec, node_cls, zctx, params)
+    return run_nodes([(spec, node_cls)], zctx)
+
+
+def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None = None) -> int:
+    """Run one node, or a container of several sharing one ZeroMQ context and one loop."""
     stopping = False
 
     def on_signal(signum, _frame):
@@ -340,122 +476,39 @@ def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = No
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-
-    ctx.open()
-    node = node_cls(params, ctx)
-    control = None
-    if spec.control_endpoint:
-        control = ctx.zctx.socket(zmq.DEALER)
-        control.setsockopt(zmq.LINGER, 0)
-        control.connect(spec.control_endpoint)
+    if zctx is None and len(nodes) > 1:
+        zctx = zmq.Context()  # inproc links work only within one context
+    loops = [NodeLoop(spec, cls, zctx) for spec, cls in nodes]
     poller = zmq.Poller()
-    poller.register(ctx.sub, zmq.POLLIN)
-    if ctx.pub is not None:
-        poller.register(ctx.pub, zmq.POLLIN)
-    if control is not None:
-        poller.register(control, zmq.POLLIN)
-
-    started_at = time.monotonic()
-    next_heartbeat = started_at
-    ready_sent = False
-    started = control is None          # without a launcher, run at once
-    finished = False
-    next_tick = started_at
-    timer = node_cls.timer_period_s
-    next_timer = started_at + (timer or 0)
-    code = 0
+    for loop in loops:
+        for s in loop.sockets():
+            poller.register(s, zmq.POLLIN)
+    pure_source = len(loops) == 1 and loops[0].is_pure_source()
+    code, current = 0, loops[0]
     try:
-        node.setup()
+        for current in loops:
+            current.node.setup()
         # What setup built (a bag's messages, kernels, tables) lives as long as the node: move it out
         # of the collector's sight, so a full collection cannot stall the loop for milliseconds.
         gc.collect()
         gc.freeze()
-        while not stopping:
+        running = True
+        while running and not stopping:
             now = time.monotonic()
-            if not ready_sent and control is not None:
-                ctx.read_subscriptions()
-                if ctx.subscribers_connected():
-                    control.send_multipart([b"ready", spec.id.encode()])
-                    ready_sent = True
-                    started = started or not node_cls.is_source  # only sources wait for "start"
-            if node_cls.is_source and started and not finished:
-                if now >= next_tick:
-                    try:
-                        delay = node.tick()
-                    except Exception as e:  # a source error ends the source, not silently
-                        ctx.handler_error("tick", e)
-                        raise
-                    if delay is None:
-                        finished = True
-                        ctx.log.info("source finished")
-                        break
-                    next_tick = max(next_tick + delay, now - 0.05)  # keep cadence, never race to catch up
-                wait_s = max(0.0, next_tick - time.monotonic())
-            else:
-                wait_s = 0.1
-            wait_s = min(wait_s, max(0.0, next_heartbeat - now), 0.1)
-            if timer:
-                wait_s = min(wait_s, max(0.0, next_timer - now))
-            if wait_s < 0.001 and not ctx.subscribes and ctx.pub is not None:
+            wait_s = min(loop.wait_s(now) for loop in loops)
+            if wait_s < 0.001 and pure_source:
                 time.sleep(wait_s)  # a pure source: sub-millisecond pacing without spinning a core
                 wait_s = 0.0
             # zmq polls in whole milliseconds; below one, poll without blocking.
             events = dict(poller.poll(int(wait_s * 1000)))
-            if ctx.sub in events:
-                batch_end = time.monotonic() + 0.02
-                newest: dict[bytes, list] = {}
-                for _ in range(1000):  # bounded batch (count and time): heartbeats and ticks still run
-                    # Asking for EVENTS is far cheaper than the zmq.Again exception of an empty recv.
-                    if not ctx.sub.getsockopt(zmq.EVENTS) & _POLLIN or time.monotonic() > batch_end:
-                        break
-                    frames = ctx.sub.recv_multipart(_NOBLOCK)
-                    if spec.keep_last and len(frames) == 2:
-                        if frames[0] in newest:
-                            ctx.skipped(frames[0])  # keep-last: an older frame nobody will see
-                        newest[frames[0]] = frames
-                        continue
-                    _handle(ctx, node, frames)
-                for frames in newest.values():
-                    _handle(ctx, node, frames)
-            if ctx.pub is not None and ctx.pub in events:
-                ctx.read_subscriptions()
-            if control is not None and control in events:
-                try:
-                    while True:
-                        if control.recv_multipart(zmq.NOBLOCK)[0] == b"start":
-                            started = True
-                            next_tick = time.monotonic()
-                except zmq.Again:
-                    pass
-            if timer and time.monotonic() >= next_timer:
-                next_timer = time.monotonic() + timer
-                try:
-                    node.on_timer()
-                except Exception as e:
-                    ctx.handler_error("timer", e)
-            if time.monotonic() >= next_heartbeat:
-                state = "running" if started else "waiting"
-                ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(state, started_at))))
-                next_heartbeat += HEARTBEAT_PERIOD_S
+            for current in loops:  # in launch-file order: upstream first, so a frame crosses in one pass
+                running = current.step(events) and running
     except Exception as e:
-        ctx.log.exception("node failed: %s", e)
+        current.ctx.log.exception("node failed: %s", e)
         code = 1
     finally:
-        if node_cls.drain_on_stop and code == 0:
-            n = ctx.drain(lambda frames: _handle(ctx, node, frames), DRAIN_S)
-            if n:
-                ctx.log.info("handled %d queued frames before stopping", n)
-        try:
-            node.teardown()
-        except Exception as e:
-            ctx.log.exception("teardown failed: %s", e)
-            code = 1
-        if ctx.pub is not None:
-            final = "finished" if finished else ("error" if code else "stopping")
-            ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(final, started_at))))
-        if control is not None:
-            control.close(linger=0)
-        ctx.close(flush_s=FLUSH_S if finished else 0.0)
+        for loop in loops:
+            code = max(code, loop.finish(code))
     return code
 
 

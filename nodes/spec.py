@@ -17,6 +17,7 @@ class NodeSpec(BaseModel):
     bind_endpoint: str | None = None          # where it binds, when that differs (containers: tcp://*:PORT)
     sub_endpoints: dict[str, list[str]] = {}  # wire topic -> publisher endpoints to connect
     expected_subscribers: dict[str, int] = {} # wire topic -> subscriber count to wait for
+    inproc: bool = False                      # also bind inproc://ID, for nodes in the same container
     control_endpoint: str | None = None       # the launcher's ROUTER socket (ready/start handshake)
     replica: int = 0
     replicas: int = 1

@@ -1,0 +1,126 @@
+"""Containers: several nodes in one OS process, wired over inproc sockets (ROS 2's component containers).
+Real processes over real sockets, as everywhere else."""
+import csv
+import os
+import re
+import signal
+from pathlib import Path
+
+import pytest
+
+from mocap_cli.launch_file import LaunchError, load_launch_file
+from mocap_cli.launcher import group, plan
+from tests.conftest import launched, pid_alive, wait_for
+
+REPO = Path(__file__).resolve().parents[2]
+
+# source -> a -> b -> log, with the two relays in one container; "tap" listens to a from outside it.
+CHAIN = """
+nodes:
+  - id: source
+    kind: synthetic_source
+    params: {{rate_hz: {rate}, frames: {frames}}}
+  - id: a
+    kind: relay
+    container: relays
+    remaps: {{in: markers/raw, out: markers/a}}
+  - id: b
+    kind: relay
+    container: relays
+    remaps: {{in: markers/a, out: markers/b}}
+  - id: log
+    kind: frame_log
+    params: {{path: {log}}}
+    remaps: {{in: markers/b}}
+  - id: tap
+    kind: frame_log
+    params: {{path: {tap}}}
+    remaps: {{in: markers/a}}
+"""
+
+
+def read_frames(path):
+    with open(path) as f:
+        return [int(r["frame"]) for r in csv.DictReader(f)]
+
+
+def chain_file(tmp_path, **kw):
+    f = tmp_path / "g.yaml"
+    f.write_text(CHAIN.format(log=tmp_path / "log.csv", tap=tmp_path / "tap.csv", **kw))
+    return f
+
+
+def test_plan_wires_a_container_inproc_inside_and_ipc_outside(tmp_path):
+    procs = plan(load_launch_file(chain_file(tmp_path, rate=100, frames=10)), "/tmp/s", "ipc:///tmp/s/control")
+    by_id = {p.spec.id: p for p in procs}
+    assert by_id["b"].spec.sub_endpoints["markers/a"] == ["inproc://a"]      # same container
+    assert by_id["tap"].spec.sub_endpoints["markers/a"] == [by_id["a"].spec.pub_endpoint]  # from outside
+    assert by_id["a"].spec.sub_endpoints["markers/raw"] == [by_id["source"].spec.pub_endpoint]
+    assert by_id["a"].spec.inproc and not by_id["b"].spec.inproc  # only a has a subscriber in its container
+    assert by_id["a"].spec.expected_subscribers["markers/a"] == 2   # b inside, tap outside
+    processes = group(procs)
+    assert [(p.name, [n.spec.id for n in p.nodes]) for p in processes] == [
+        ("source", ["source"]), ("relays", ["a", "b"]), ("log", ["log"]), ("tap", ["tap"])]
+    assert processes[1].argv().startswith("[") and processes[0].argv().startswith("{")
+
+
+@pytest.mark.parametrize("entry, message", [
+    ("{id: s, kind: synthetic_source, container: c}", "a source ends its process"),
+    ("{id: r, kind: relay, container: c, replicas: 2}", "a container is one process"),
+    ("{id: r, kind: relay, container: r2}\n  - {id: r2, kind: relay}", "has the name of a node"),
+    ("{id: r, kind: relay, container: 'no spaces'}", "container"),
+])
+def test_bad_containers_are_refused_with_a_reason(tmp_path, entry, message):
+    f = tmp_path / "g.yaml"
+    f.write_text(f"nodes:\n  - {entry}\n")
+    with pytest.raises(LaunchError, match=message):
+        plan(load_launch_file(f), "/tmp/s", "ipc:///tmp/s/control")
+
+
+def test_containers_and_curve_are_refused_together(tmp_path):
+    f = tmp_path / "g.yaml"
+    f.write_text("transport: {kind: tcp, curve_keys: keys}\nnodes:\n  - {id: r, kind: relay, container: c}\n")
+    with pytest.raises(LaunchError, match="not supported with curve_keys"):
+        load_launch_file(f)
+
+
+def test_a_container_delivers_every_frame_inside_and_out(tmp_path):
+    f = chain_file(tmp_path, rate=500, frames=300)
+    with launched(tmp_path, f.read_text(), "--until-done") as g:
+        g.proc.wait(timeout=40)
+        assert g.proc.returncode == 0, g.log()
+    assert read_frames(tmp_path / "log.csv") == list(range(300)), "frames lost or reordered through the container"
+    assert read_frames(tmp_path / "tap.csv") == list(range(300)), "an outside subscriber of an inner topic lost frames"
+    assert "started 5 nodes in 4 processes" in g.log()
+
+
+def test_a_killed_container_is_restarted_with_all_its_nodes(tmp_path):
+    f = chain_file(tmp_path, rate=200, frames=0)
+    log = tmp_path / "log.csv"
+    with launched(tmp_path, f.read_text()) as g:
+        wait_for(lambda: log.exists() and len(read_frames(log)) > 20, 20, "frames through the container")
+        pids = g.node_pids()
+        assert pids["a"] == pids["b"] != pids["source"], "a container's nodes share one process"
+        hb = g.heartbeats()
+        assert {"a", "b"} <= set(hb), f"every node of a container sends its own heartbeat: {sorted(hb)}"
+        os.kill(pids["a"], signal.SIGKILL)
+        new = wait_for(lambda: (p := g.node_pids().get("a")) != pids["a"] and p, 8, "a restarted container")
+        assert pid_alive(new) and g.node_pids()["b"] == new
+        n = len(read_frames(log))
+        wait_for(lambda: len(read_frames(log)) > n + 20, 8, "frames after the restart")
+        assert "restarted container relays (a, b)" in g.log()
+        took = g.stop()
+        assert took < 2.0 and not pid_alive(new)
+
+
+def test_studio_composed_is_studio_with_container_lines():
+    """launch/studio_composed.yaml must stay the same graph as launch/studio.yaml."""
+    plain = load_launch_file(REPO / "launch" / "studio.yaml")
+    composed = load_launch_file(REPO / "launch" / "studio_composed.yaml")
+    assert [n.model_dump(exclude={"container"}) for n in plain.nodes] == \
+           [n.model_dump(exclude={"container"}) for n in composed.nodes]
+    kinds = {n.kind: n.container for n in composed.nodes}
+    assert kinds["file_source"] is None and kinds["viewer"] is None
+    assert {n.container for n in composed.nodes if n.kind in ("ik_gapfill", "retarget", "hip_interpolation")} == \
+           {"core"}
+    assert re.search(r"container: core", (REPO / "launch" / "studio_composed.yaml").read_text())
