@@ -22,7 +22,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from mocap_cli.graph_registry import registry_path  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
-from mocap_cli.measure import frame_log_figures, live_graph  # noqa: E402
+from mocap_cli.measure import capture_frames_missing, frame_log_figures, live_graph  # noqa: E402
 from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
@@ -70,7 +70,8 @@ def main():
         sim.wait()
     lat, gaps = frame_log_figures(out)
     print(f"{len(lat)} skeletons in {seconds:.0f} s ({len(lat) / seconds:.0f} Hz; QTM at {args.rate:.0f} Hz); "
-          f"sequence gaps at the sink: {gaps}")
+          f"sequence gaps at the sink: {gaps}; capture frames missing at the sink (lost anywhere, "
+          f"QTM's stream included): {capture_frames_missing(out)}")
     if "end" not in samples:
         return
     (start, t0), (end, t1) = samples["start"], samples["end"]

@@ -4,7 +4,8 @@ One image (the repository's Dockerfile), one service per node process, tcp betwe
 publisher binds tcp://*:PORT, subscribers connect tcp://SERVICE:PORT), the same specs the launcher
 would give. QTM's address is a setting: QTM_HOST (default: the Docker host). There is no launcher in the
 containers, so there is no ready/start handshake: services start in dependency order and a
-restart policy stands in for the launcher's respawn.
+restart policy stands in for the launcher's respawn. A launch file's ``container:`` groups are not
+kept: every node gets its own service (Docker's unit is the process; spread them over hosts as needed).
 """
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ BASE_PORT = 7100
 
 def compose(launch_path: str) -> str:
     lf: LaunchFile = load_launch_file(launch_path)
+    for n in lf.nodes:
+        n.container = None  # one service per node, wired over tcp
     procs = plan(lf, "/unused", "")
     services = {}
     ports = {}

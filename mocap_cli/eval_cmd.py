@@ -199,7 +199,7 @@ def run_latency(args) -> int:
 
     from mocap_cli.bare_chain import bare_chain
     from mocap_cli.launcher import Launcher
-    from mocap_cli.measure import frame_log_figures, live_graph
+    from mocap_cli.measure import capture_frames_missing, frame_log_figures, live_graph
     from mocap_cli.qtm_sim import start_emulator
 
     solved = Path(tempfile.mkdtemp(prefix="mocap-latency-")) / "solved.csv"
@@ -212,6 +212,7 @@ def run_latency(args) -> int:
         sim.send_signal(signal.SIGINT)
         sim.wait()
     lat, drops = frame_log_figures(solved)
+    missing = capture_frames_missing(solved)
     frames_out = len(lat)
     if frames_out < 10:
         log.error("only %d frames reached skeleton/solved in %.0f s: run longer (--seconds)", frames_out, args.seconds)
@@ -222,11 +223,12 @@ def run_latency(args) -> int:
     layout = "solving nodes in one container process" if args.composed else "one process per node"
     md = [f"Full graph ({layout}) fed by the QTM emulator at {args.rate:.0f} Hz for {args.seconds:.0f} s "
           f"({frames_out} frames out of skeleton/solved); latency from entering qtm_ingest to leaving retarget, ms.", "",
-          "| chain | hops | p50 | p99 | max | dropped |", "|---|---|---|---|---|---|",
+          "| chain | hops | p50 | p99 | max | dropped (last hop) | capture frames missing |",
+          "|---|---|---|---|---|---|---|",
           f"| mocap graph | {hops} | {np.percentile(lat, 50):.2f} | {np.percentile(lat, 99):.2f} | {lat.max():.2f} | "
-          f"{drops} |",
+          f"{drops} | {missing} |",
           f"| bare pyzmq relays | {hops} | {np.percentile(bare, 50):.2f} | {np.percentile(bare, 99):.2f} | "
-          f"{bare.max():.2f} | - |", "",
+          f"{bare.max():.2f} | - | - |", "",
           f"ratio (p50): {np.percentile(lat, 50) / np.percentile(bare, 50):.2f}"]
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)

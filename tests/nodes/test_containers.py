@@ -124,3 +124,24 @@ def test_studio_composed_is_studio_with_container_lines():
     assert {n.container for n in composed.nodes if n.kind in ("ik_gapfill", "retarget", "hip_interpolation")} == \
            {"core"}
     assert re.search(r"container: core", (REPO / "launch" / "studio_composed.yaml").read_text())
+
+
+def test_compose_gives_a_composed_graph_one_service_per_node():
+    from mocap_cli.compose import compose
+
+    text = compose(str(REPO / "launch" / "studio_composed.yaml"))
+    assert "inproc" not in text, "docker services cannot share inproc sockets"
+    plain = compose(str(REPO / "launch" / "studio.yaml"))
+    same = text.split("\n", 1)[1].replace("studio-composed", "studio").replace('"studio_composed"', '"studio"')
+    assert same == plain.split("\n", 1)[1]
+
+
+def test_capture_frames_missing_counts_gaps_anywhere_and_ignores_a_loop(tmp_path):
+    from mocap_cli.measure import capture_frames_missing, frame_log_figures
+
+    log = tmp_path / "log.csv"
+    rows = [(0, 1), (1, 2), (4, 3), (5, 4), (0, 5), (2, 6)]  # (capture frame, seq): 2+0+1 frames lost, a loop
+    log.write_text("frame,seq,publisher,schema,latency_us,estimated,held,missing\n" +
+                   "".join(f"{f},{s},retarget,mocap.SkeletonFrame,1000,0,0,0\n" for f, s in rows))
+    assert capture_frames_missing(log) == 3
+    assert frame_log_figures(log)[1] == 0, "the last hop lost nothing"
