@@ -1,9 +1,10 @@
 """Soak (issue 10; not run in CI): the full graph fed by the QTM emulator at 1000 Hz for 10 minutes.
 Reports drops, throughput and each node's RSS at the start and the end (memory must stay flat).
 
-    python benchmarks/soak.py [--minutes 10] [--rate 1000] [--composed]
+    python benchmarks/soak.py [--minutes 10] [--rate 1000] [--layout processes|one|two]
 
---composed runs the solving nodes in one container process (launch/studio_composed.yaml's layout).
+--layout: one process per node (the default), the solving nodes in one container (launch/
+studio_composed.yaml), or in two containers (both cores of a 2-core machine at work).
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from mocap_cli.graph_registry import registry_path  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
-from mocap_cli.measure import capture_frames_missing, frame_log_figures, live_graph  # noqa: E402
+from mocap_cli.measure import LAYOUTS, capture_frames_missing, frame_log_figures, live_graph  # noqa: E402
 from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
@@ -48,11 +49,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--minutes", type=float, default=10)
     ap.add_argument("--rate", type=float, default=1000)
-    ap.add_argument("--composed", action="store_true", help="the solving nodes in one container process")
+    ap.add_argument("--layout", choices=sorted(LAYOUTS), default="processes",
+                    help="where the solving nodes run (mocap_cli/measure.py LAYOUTS)")
     args = ap.parse_args()
     sim, port = start_emulator(str(TAKE), "--rate", str(args.rate), "--loop", cwd=str(REPO))
     out = Path(tempfile.mkdtemp()) / "solved.csv"
-    lf = live_graph(port, "cmu41", out, "soak", container="core" if args.composed else None)
+    lf = live_graph(port, "cmu41", out, "soak", layout=args.layout)
     seconds = args.minutes * 60
     samples = {}
 

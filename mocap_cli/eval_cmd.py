@@ -10,6 +10,7 @@ from typing import get_args
 
 from tqdm import tqdm
 
+from mocap_cli.measure import LAYOUTS
 from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, localize_take, reacquisition_jump,
                                     worst_case_timing)
 from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
@@ -76,8 +77,9 @@ def add_parser(sub) -> None:
     lt.add_argument("--take", default=str(REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"))
     lt.add_argument("--profile", default="cmu41")
     lt.add_argument("--report", default="reports/latency")
-    lt.add_argument("--composed", action="store_true",
-                    help="run the solving nodes in one container process (launch/studio_composed.yaml's layout)")
+    lt.add_argument("--layout", choices=sorted(LAYOUTS), default="processes",
+                    help="where the solving nodes run: a process each (default), one container "
+                         "(launch/studio_composed.yaml) or two containers")
     lt.set_defaults(func=run_latency)
 
 
@@ -206,7 +208,7 @@ def run_latency(args) -> int:
     sim, port = start_emulator(args.take, "--rate", str(args.rate), "--loop")
     try:
         lf = live_graph(port, args.profile, solved, f"latency-{int(time.time())}",
-                        container="core" if args.composed else None)
+                        layout=args.layout)
         Launcher(lf).run(duration_s=args.seconds)
     finally:
         sim.send_signal(signal.SIGINT)
@@ -220,7 +222,8 @@ def run_latency(args) -> int:
     lat = lat[len(lat) // 10:]  # leave out the first 10% (start-up)
     hops = 6  # ingest -> hips -> localize -> torso -> limb -> retarget -> log
     bare = bare_chain(hops, min(3000, int(args.rate * 10)), args.rate) / 1000
-    layout = "solving nodes in one container process" if args.composed else "one process per node"
+    layout = {"processes": "one process per node", "one": "solving nodes in one container",
+              "two": "solving nodes in two containers"}[args.layout]
     md = [f"Full graph ({layout}) fed by the QTM emulator at {args.rate:.0f} Hz for {args.seconds:.0f} s "
           f"({frames_out} frames out of skeleton/solved); latency from entering qtm_ingest to leaving retarget, ms.", "",
           "| chain | hops | p50 | p99 | max | dropped (last hop) | capture frames missing |",
@@ -232,6 +235,6 @@ def run_latency(args) -> int:
           f"ratio (p50): {np.percentile(lat, 50) / np.percentile(bare, 50):.2f}"]
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"latency_{args.rate:.0f}hz{'_composed' if args.composed else ''}.md").write_text("\n".join(md) + "\n")
+    (out / f"latency_{args.rate:.0f}hz{'' if args.layout == 'processes' else '_' + args.layout}.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     return 0

@@ -12,15 +12,27 @@ from mocap_cli.launch_file import LaunchFile, NodeEntry, load_launch_file
 REPO = Path(__file__).resolve().parents[1]
 
 
+# Where the solving nodes run (node id -> container; absent: a process of its own). "one" is
+# launch/studio_composed.yaml's layout (lowest latency); "two" splits the work over two processes, so
+# both cores of a 2-core machine take part (highest throughput).
+LAYOUTS: dict[str, dict[str, str]] = {
+    "processes": {},
+    "one": {n: "core" for n in ("hips", "localize", "torso", "left_arm", "right_arm", "left_leg", "right_leg",
+                                "retarget")},
+    "two": {**{n: "front" for n in ("hips", "localize", "torso", "left_arm", "right_arm")},
+            **{n: "back" for n in ("left_leg", "right_leg", "retarget")}},
+}
+
+
 def live_graph(port: int, profile: str, log_path: str | Path, name: str, up_axis: str = "z",
-               container: str | None = None) -> LaunchFile:
-    """launch/qtm_studio.yaml pointed at the emulator, without the viewer and VMC, logging skeleton/solved.
-    With ``container``, the solving nodes (all but the ingest and the log) share that one process."""
+               layout: str = "processes") -> LaunchFile:
+    """launch/qtm_studio.yaml pointed at the emulator, without the viewer and VMC, logging skeleton/solved,
+    with the solving nodes in the processes ``layout`` names (see LAYOUTS)."""
     lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [
         f"qtm.port={port}", f"hips.profile={profile}", f"localize.profile={profile}", f"retarget.up_axis={up_axis}"])
     lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]
     for n in lf.nodes:
-        n.container = container if n.kind != "qtm_ingest" else None
+        n.container = LAYOUTS[layout].get(n.id)
     lf.nodes.append(NodeEntry(id="log", kind="frame_log", params={"path": str(log_path)},
                               remaps={"in": "skeleton/solved"}))
     lf.name = name
