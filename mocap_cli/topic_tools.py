@@ -138,16 +138,17 @@ def collect_heartbeats(graph: dict, seconds: float = 1.5) -> dict[str, Heartbeat
 
 def node_list(graph: dict, seconds: float = 1.5, out: TextIO = sys.stdout) -> dict[str, Heartbeat]:
     beats = collect_heartbeats(graph, seconds)
-    out.write(f"{'node':<20} {'kind':<18} {'pid':>7} {'state':<9} {'in Hz':>8} {'out Hz':>8} "
+    out.write(f"{'node':<20} {'kind':<18} {'pid':>7} {'process':<12} {'state':<9} {'in Hz':>8} {'out Hz':>8} "
               f"{'p50 ms':>7} {'p99 ms':>7} {'drops':>6} {'errors':>6}\n")
     for n in graph["nodes"]:
         hb = beats.get(n["id"])
+        process = n.get("process", n["id"])  # a container's name, or the node's own
         if hb is None:
-            out.write(f"{n['id']:<20} {n['kind']:<18} {str(n['pid']):>7} {'silent':<9}\n")
+            out.write(f"{n['id']:<20} {n['kind']:<18} {str(n['pid']):>7} {process:<12} {'silent':<9}\n")
             continue
         rin = sum(v for t, v in hb.rates_hz.items() if t in hb.received)
         rout = sum(v for t, v in hb.rates_hz.items() if t in hb.published)
-        out.write(f"{hb.node:<20} {hb.kind:<18} {hb.pid:>7} {hb.state:<9} {rin:>8.1f} {rout:>8.1f} "
+        out.write(f"{hb.node:<20} {hb.kind:<18} {hb.pid:>7} {process:<12} {hb.state:<9} {rin:>8.1f} {rout:>8.1f} "
                   f"{hb.latency.p50_ms:>7.2f} {hb.latency.p99_ms:>7.2f} {sum(hb.drops.values()):>6} "
                   f"{sum(hb.errors.values()):>6}\n")
     return beats
