@@ -161,6 +161,17 @@ def peek_header(payload: bytes) -> dict:
         return {}
 
 
+_ARRAY_FIELDS: dict[type, tuple[str, ...]] = {}
+
+
+def array_fields(cls: type[BaseModel]) -> tuple[str, ...]:
+    """The names of a model's array fields (top level)."""
+    got = _ARRAY_FIELDS.get(cls)
+    if got is None:
+        got = _ARRAY_FIELDS[cls] = tuple(n for n, f in cls.model_fields.items() if _array_spec(f.metadata))
+    return got
+
+
 # -- encoding ----------------------------------------------------------------------------------------
 _PACKERS: dict[type, Callable[[BaseModel], dict]] = {}
 
@@ -203,6 +214,7 @@ def prepare(cls: type[BaseModel]) -> None:
     if cls not in _COMPILED:
         compile_model(cls)
     packer(cls)
+    array_fields(cls)
 
 
 def fast_encode(msg: BaseModel) -> bytes:

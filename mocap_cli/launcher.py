@@ -3,7 +3,8 @@
 1. Plan: resolve node kinds, validate their params, give each process a PUB endpoint, and for each
    topic work out who publishes it and how many subscribers each publisher must see.
 2. Start: spawn ``python -m nodes.run SPEC`` per process (a container's nodes share one process and get
-   ``[SPEC, ...]``; between themselves they talk over ``inproc://``). Each node reports "ready" over the
+   ``[SPEC, ...]``; between themselves they hand messages over as objects, heartbeats go over
+   ``inproc://``). Each node reports "ready" over the
    control socket once its XPUB has seen all its expected subscribers; when every node is ready the
    sources get "start". No sleeps: a source cannot send before the graph is wired.
 3. Watch: a node that dies is restarted with exponential backoff (0.1 s doubling to 5 s; reset
@@ -137,18 +138,29 @@ def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
     for sub in procs:
         for topic in sub.subscribes:
             pubs = [p for p in procs if topic in p.publishes and p is not sub]
+            # Within a container a message goes over as the object itself (ROS 2's intra-process
+            # hand-off): no socket, no codec, and nothing for the publisher's XPUB to wait for.
+            local = [p for p in pubs if _same_container(sub, p) and topic != DIAGNOSTICS]
+            if local:
+                sub.spec.local_topics.append(topic)
+            pubs = [p for p in pubs if p not in local]
             sub.spec.sub_endpoints[topic] = [_endpoint_for(sub, p) for p in pubs]
             for p in pubs:
                 p.spec.expected_subscribers[topic] = p.spec.expected_subscribers.get(topic, 0) + 1
-    unfed = sorted({(p.spec.id, t) for p in procs for t in p.subscribes if not p.spec.sub_endpoints[t]})
+    unfed = sorted({(p.spec.id, t) for p in procs for t in p.subscribes
+                    if not p.spec.sub_endpoints[t] and t not in p.spec.local_topics})
     for node_id, topic in unfed:
         log.warning("node %s subscribes to %s but no node in the graph publishes it", node_id, topic)
     return procs
 
 
+def _same_container(a: Proc, b: Proc) -> bool:
+    return a.container is not None and a.container == b.container
+
+
 def _endpoint_for(sub: Proc, pub: Proc) -> str:
-    """Where ``sub`` connects to reach ``pub``: inproc within a container, else the pub endpoint."""
-    if sub.container is not None and sub.container == pub.container:
+    """Where ``sub`` connects to reach ``pub``: inproc within a container (heartbeats), else the pub endpoint."""
+    if _same_container(sub, pub):
         pub.spec.inproc = True
         return inproc_endpoint(pub.spec.id)
     return pub.spec.pub_endpoint

@@ -11,6 +11,10 @@ writes (``publishes``), and handlers. The runtime owns the sockets and the loop:
 - a malformed or foreign message is counted, logged with topic and reason, and skipped;
 - a 1 Hz :class:`~messages.Heartbeat` on ``diagnostics`` with rates, latency percentiles
   (from the header's entry time), drops (sequence gaps per publisher) and error counts;
+- in a container (several nodes in one process), a message for a neighbour is handed over as the
+  object itself, like ROS 2's intra-process communication: no codec and no socket, and it is encoded
+  only when someone outside the process subscribes; its arrays are made read-only, so one subscriber
+  cannot change what another sees (the same as arrays decoded from bytes);
 - SIGINT/SIGTERM end the loop; sockets close with LINGER 0, except that a source that finished
   flushes what it already sent (at most FLUSH_S), and a node with ``drain_on_stop`` (the recorder)
   handles what is already queued for it before it tears down: a last frame is not lost to a race
@@ -19,6 +23,7 @@ writes (``publishes``), and handlers. The runtime owns the sockets and the loop:
 from __future__ import annotations
 
 import collections
+import copy
 import gc
 import logging
 import os
@@ -32,7 +37,7 @@ from pydantic import BaseModel, ConfigDict
 
 from messages import ALL_MESSAGES, DecodeError, Heartbeat, Latency, Message, decode, encode
 from messages.codec import MAX_MESSAGE_BYTES
-from messages.fastpath import prepare
+from messages.fastpath import array_fields, prepare
 from nodes.spec import NodeSpec
 
 HEARTBEAT_PERIOD_S = 1.0
@@ -98,6 +103,17 @@ def inproc_endpoint(node_id: str) -> str:
     return f"inproc://{node_id}"
 
 
+class LocalBus:
+    """A container's in-process hand-off: wire topic -> the contexts of the neighbours that read it."""
+
+    def __init__(self):
+        self.readers: dict[str, list["NodeContext"]] = collections.defaultdict(list)
+
+    def join(self, ctx: "NodeContext") -> None:
+        for wire in ctx.spec.local_topics:
+            self.readers[wire].append(ctx)
+
+
 class _TopicStats:
     __slots__ = ("count", "drops", "last_seq", "last_frame", "lost_frames", "rate_mark")
 
@@ -140,7 +156,11 @@ class NodeContext:
         self._logical = {w: t for t, w in self._wire.items() if t in self.subscribes}
         self.pub: zmq.Socket | None = None
         self.sub: zmq.Socket | None = None
+        self.sub_connected = False  # False when every input is handed over in-process
         self._subscriptions: collections.Counter[bytes] = collections.Counter()
+        self._outside: dict[str, bool] = {}  # wire topic -> has a subscriber beyond the process (cache)
+        self.local_readers: dict[str, list[NodeContext]] = {}  # wire topic -> container neighbours
+        self.inbox: collections.deque[tuple[str, Message]] = collections.deque()  # handed over, not yet handled
         for cls in ALL_MESSAGES:  # (a node typed `Message`, like the recorder, may get any of them)
             prepare(cls)  # the first frame through a node should cost what every other one does
 
@@ -173,6 +193,7 @@ class NodeContext:
             self.sub.setsockopt(zmq.SUBSCRIBE, wire.encode())
             for endpoint in spec.sub_endpoints.get(wire, []):
                 self.sub.connect(endpoint)
+                self.sub_connected = True
 
     def close(self, flush_s: float = 0.0) -> None:
         """Close the sockets; with ``flush_s``, first let the I/O thread send what was published."""
@@ -209,11 +230,23 @@ class NodeContext:
                 self._subscriptions[note[1:]] += 1
             elif note[:1] == b"\x00":
                 self._subscriptions[note[1:]] -= 1
+            else:
+                continue
+            self._outside.clear()
+
+    def _has_outside(self, wire: str) -> bool:
+        """Whether a subscription seen by the XPUB (a prefix, as ZeroMQ matches them) covers a topic."""
+        got = self._outside.get(wire)
+        if got is None:
+            key = wire.encode()
+            got = self._outside[wire] = any(n > 0 and key.startswith(p) for p, n in self._subscriptions.items())
+        return got
 
     def has_subscribers(self, topic: str) -> bool:
-        """Whether anyone subscribes to a logical topic now (skip work nobody will receive)."""
-        self.read_subscriptions()
-        return self._subscriptions[self.wire_topic(topic).encode()] > 0
+        """Whether anyone subscribes to a logical topic now (skip work nobody will receive); the loop
+        reads the XPUB's subscription notices whenever it has some."""
+        wire = self.wire_topic(topic)
+        return wire in self.local_readers or self._has_outside(wire)
 
     def subscribers_connected(self) -> bool:
         return all(self._subscriptions[t.encode()] >= n for t, n in self.spec.expected_subscribers.items())
@@ -227,6 +260,9 @@ class NodeContext:
         graph-entry time are carried over from the message this one was computed from."""
         if self.pub is None:
             return
+        if msg.header.publisher:  # published before (a relay's): stamp a copy, others may hold this one
+            msg = copy.copy(msg)
+            msg.__dict__["header"] = copy.copy(msg.header)
         # Written straight into the header's __dict__: pydantic's __setattr__ would cost ~10 us a message.
         h = msg.header.__dict__
         h["schema_name"], h["version"] = msg.SCHEMA, msg.VERSION
@@ -238,9 +274,28 @@ class NodeContext:
         wire = self.wire_topic(topic)
         seq = self._seq[wire] = self._seq[wire] + 1
         h["seq"], h["publisher"] = seq, self.publisher_id
-        self.send_raw(wire, encode(msg))
+        readers = self.local_readers.get(wire)
+        if readers is None:
+            self.send_raw(wire, encode(msg))
+            return
+        _freeze_arrays(msg)
+        for reader in readers:
+            reader.hand_over(wire, msg)
+        if self._has_outside(wire):
+            self._send(wire, encode(msg))
+        else:
+            self._pub_stats[wire].count += 1
 
     def send_raw(self, wire_topic: str, payload: bytes) -> None:
+        """Send bytes already encoded (a bag's, a heartbeat); neighbours in a container get them decoded."""
+        for reader in self.local_readers.get(wire_topic, ()):
+            try:
+                reader.hand_over(wire_topic, _freeze_arrays(decode(payload, wire_topic)))
+            except DecodeError as e:
+                reader._error(f"decode_{e.kind}", str(e))
+        self._send(wire_topic, payload)
+
+    def _send(self, wire_topic: str, payload: bytes) -> None:
         try:  # two sends rather than send_multipart: a few microseconds less per message
             self.pub.send(wire_topic.encode(), _MORE)
             self.pub.send(payload, _NOBLOCK)
@@ -250,6 +305,11 @@ class NodeContext:
         self._pub_stats[wire_topic].count += 1
 
     # -- receiving ---------------------------------------------------------------------------------
+    def hand_over(self, wire: str, msg: Message) -> None:
+        """A container neighbour's message, queued as the object itself (at most ``hwm``, as a socket)."""
+        if len(self.inbox) < self.spec.hwm:
+            self.inbox.append((wire, msg))  # else dropped: the sequence gap counts it, as over a socket
+
     def receive(self, frames: list[bytes]) -> tuple[str, Message] | None:
         """Decode one multipart frame into (logical topic, message); count and log failures."""
         if len(frames) != 2:
@@ -264,8 +324,12 @@ class NodeContext:
         except DecodeError as e:
             self._error(f"decode_{e.kind}", str(e))
             return None
+        return (logical, msg) if self.account(wire, msg) else None
+
+    def account(self, wire: str, msg: Message) -> bool:
+        """Count a received message (sequence gaps, restarts, latency); False for a sibling replica's."""
         if self.spec.replicas > 1 and msg.header.frame % self.spec.replicas != self.spec.replica:
-            return None  # a sibling replica's frame
+            return False  # a sibling replica's frame
         st = self._sub_stats[wire]
         st.count += 1
         h = msg.header
@@ -279,7 +343,7 @@ class NodeContext:
         st.last_frame[h.publisher] = h.frame
         if h.entry_time_ns:
             self._latency_ns.append(time.time_ns() - h.entry_time_ns)
-        return logical, msg
+        return True
 
     def skipped(self, wire_topic: bytes) -> None:
         self._sub_stats[wire_topic.decode("utf-8", "replace")].drops += 1
@@ -357,6 +421,7 @@ class NodeLoop:
         self.ready_sent = False
         self.started = self.control is None  # without a launcher, run at once
         self.finished = False
+        self.wants_bytes = node_cls.on_raw is not Node.on_raw  # a recorder: hand-offs get encoded for it
 
     def sockets(self) -> list[zmq.Socket]:
         return [s for s in (self.ctx.sub, self.ctx.pub, self.control) if s is not None]
@@ -366,6 +431,8 @@ class NodeLoop:
 
     def wait_s(self, now: float) -> float:
         """How long the process may block in poll before this node has something to do."""
+        if self.ctx.inbox:
+            return 0.0
         if self.node_cls.is_source and self.started and not self.finished:
             wait = max(0.0, self.next_tick - now)
         else:
@@ -399,7 +466,7 @@ class NodeLoop:
         # Read the SUB socket whether or not poll named it: in a container, a frame an upstream node
         # published a moment ago in this same pass is already here (inproc), so it goes on at once.
         if ctx.subscribes:
-            self._read_sub()
+            self._read_sub()  # (and the inbox of a container's hand-offs)
         if ctx.pub is not None and ctx.pub in events:
             ctx.read_subscriptions()
         if self.control is not None and self.control in events:
@@ -422,8 +489,29 @@ class NodeLoop:
             self.next_heartbeat += HEARTBEAT_PERIOD_S
         return True
 
+    def _read_inbox(self) -> None:
+        """Handle what container neighbours handed over (all of it: they put it there this pass)."""
+        ctx, node, inbox = self.ctx, self.node, self.ctx.inbox
+        newest: dict[str, Message] = {}
+        while inbox:
+            wire, msg = inbox.popleft()
+            if not ctx.account(wire, msg):
+                continue
+            if self.spec.keep_last:
+                if wire in newest:
+                    ctx._sub_stats[wire].drops += 1  # keep-last: an older frame nobody will see
+                newest[wire] = msg
+                continue
+            _handle_local(ctx, node, wire, msg, self.wants_bytes)
+        for wire, msg in newest.items():
+            _handle_local(ctx, node, wire, msg, self.wants_bytes)
+
     def _read_sub(self) -> None:
         ctx, node, sub = self.ctx, self.node, self.ctx.sub
+        if ctx.inbox:
+            self._read_inbox()
+        if not ctx.sub_connected:
+            return
         batch_end = time.monotonic() + 0.02
         newest: dict[bytes, list] = {}
         for _ in range(1000):  # bounded batch (count and time): heartbeats and ticks still run
@@ -444,6 +532,7 @@ class NodeLoop:
         """Drain (if asked), tear down, say goodbye on diagnostics, close. Returns the exit code."""
         ctx = self.ctx
         if self.node_cls.drain_on_stop and code == 0:
+            self._read_inbox()
             n = ctx.drain(lambda frames: _handle(ctx, self.node, frames), DRAIN_S)
             if n:
                 ctx.log.info("handled %d queued frames before stopping", n)
@@ -459,6 +548,16 @@ class NodeLoop:
             self.control.close(linger=0)
         ctx.close(flush_s=FLUSH_S if self.finished else 0.0)
         return code
+
+
+def wire_hand_over(loops: list[NodeLoop]) -> None:
+    """Connect a container's publishers to the neighbours that read their topics in-process."""
+    bus = LocalBus()
+    for loop in loops:
+        bus.join(loop.ctx)
+    for loop in loops:
+        loop.ctx.local_readers = {w: bus.readers[w] for w in map(loop.ctx.wire_topic, loop.ctx.publishes)
+                                  if w in bus.readers}
 
 
 def run_node(spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None) -> int:
@@ -479,6 +578,7 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
     if zctx is None and len(nodes) > 1:
         zctx = zmq.Context()  # inproc links work only within one context
     loops = [NodeLoop(spec, cls, zctx) for spec, cls in nodes]
+    wire_hand_over(loops)
     poller = zmq.Poller()
     for loop in loops:
         for s in loop.sockets():
@@ -512,6 +612,16 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
     return code
 
 
+def _handle_local(ctx: NodeContext, node: Node, wire: str, msg: Message, wants_bytes: bool) -> None:
+    try:
+        if wants_bytes:
+            node.on_raw(wire, encode(msg), msg)
+        else:
+            node.on_message(ctx._logical[wire], msg)
+    except Exception as e:
+        ctx.handler_error(ctx._logical[wire], e)
+
+
 def _handle(ctx: NodeContext, node: Node, frames: list[bytes]) -> None:
     got = ctx.receive(frames)
     if got is None:
@@ -520,6 +630,14 @@ def _handle(ctx: NodeContext, node: Node, frames: list[bytes]) -> None:
         node.on_raw(frames[0].decode(), frames[1], got[1])
     except Exception as e:
         ctx.handler_error(got[0], e)
+
+
+def _freeze_arrays(msg: Message) -> Message:
+    """Make a handed-over message's arrays read-only, as arrays decoded from bytes are."""
+    d = msg.__dict__
+    for name in array_fields(type(msg)):
+        d[name].flags.writeable = False
+    return msg
 
 
 def _stamped(ctx: NodeContext, hb: Heartbeat) -> Heartbeat:

@@ -18,6 +18,7 @@ class NodeSpec(BaseModel):
     sub_endpoints: dict[str, list[str]] = {}  # wire topic -> publisher endpoints to connect
     expected_subscribers: dict[str, int] = {} # wire topic -> subscriber count to wait for
     inproc: bool = False                      # also bind inproc://ID, for nodes in the same container
+    local_topics: list[str] = []              # wire topics handed over in-process by container neighbours
     control_endpoint: str | None = None       # the launcher's ROUTER socket (ready/start handshake)
     replica: int = 0
     replicas: int = 1

@@ -6,10 +6,15 @@ import re
 import signal
 from pathlib import Path
 
+import numpy as np
 import pytest
+import zmq
 
+from messages import MarkerFrame
 from mocap_cli.launch_file import LaunchError, load_launch_file
 from mocap_cli.launcher import group, plan
+from nodes.runtime import Node, NodeLoop, wire_hand_over
+from nodes.spec import NodeSpec
 from tests.conftest import launched, pid_alive, wait_for
 
 REPO = Path(__file__).resolve().parents[2]
@@ -50,14 +55,15 @@ def chain_file(tmp_path, **kw):
     return f
 
 
-def test_plan_wires_a_container_inproc_inside_and_ipc_outside(tmp_path):
+def test_plan_hands_over_inside_a_container_and_wires_ipc_outside(tmp_path):
     procs = plan(load_launch_file(chain_file(tmp_path, rate=100, frames=10)), "/tmp/s", "ipc:///tmp/s/control")
     by_id = {p.spec.id: p for p in procs}
-    assert by_id["b"].spec.sub_endpoints["markers/a"] == ["inproc://a"]      # same container
+    assert by_id["b"].spec.local_topics == ["markers/a"]            # same container: the object itself
+    assert by_id["b"].spec.sub_endpoints["markers/a"] == []         # ... and no socket for it
     assert by_id["tap"].spec.sub_endpoints["markers/a"] == [by_id["a"].spec.pub_endpoint]  # from outside
     assert by_id["a"].spec.sub_endpoints["markers/raw"] == [by_id["source"].spec.pub_endpoint]
-    assert by_id["a"].spec.inproc and not by_id["b"].spec.inproc  # only a has a subscriber in its container
-    assert by_id["a"].spec.expected_subscribers["markers/a"] == 2   # b inside, tap outside
+    assert by_id["a"].spec.local_topics == [] and by_id["tap"].spec.local_topics == []
+    assert by_id["a"].spec.expected_subscribers["markers/a"] == 1   # tap outside; b is not a socket peer
     processes = group(procs)
     assert [(p.name, [n.spec.id for n in p.nodes]) for p in processes] == [
         ("source", ["source"]), ("relays", ["a", "b"]), ("log", ["log"]), ("tap", ["tap"])]
@@ -148,3 +154,57 @@ def test_capture_frames_missing_counts_gaps_anywhere_and_ignores_a_loop(tmp_path
                    "".join(f"{f},{s},retarget,mocap.SkeletonFrame,1000,0,0,0\n" for f, s in rows))
     assert capture_frames_missing(log) == 3
     assert frame_log_figures(log)[1] == 0, "the last hop lost nothing"
+
+
+class _Keep(Node):
+    """Keeps what it gets and republishes it (a relay that remembers)."""
+    kind = "keep"
+    subscribes = {"in": MarkerFrame}
+    publishes = {"out": MarkerFrame}
+
+    def setup(self):
+        self.got = []
+
+    def on_message(self, topic, msg):
+        self.got.append(msg)
+        self.ctx.publish("out", msg, source=msg)
+
+
+def test_hand_over_gives_neighbours_the_object_read_only_and_a_relay_stamps_a_copy():
+    """In a container a message is handed over as the object itself: no codec, no socket. Its arrays
+    are read-only (as decoded ones are), and a neighbour that republishes it does not change what the
+    others hold."""
+    zctx = zmq.Context()
+    specs = [NodeSpec(id="a", kind="keep", remaps={"in": "m/raw", "out": "m/a"}, pub_endpoint="inproc://t-a"),
+             NodeSpec(id="b", kind="keep", remaps={"in": "m/a", "out": "m/b"}, pub_endpoint="inproc://t-b",
+                      local_topics=["m/a"]),
+             NodeSpec(id="c", kind="keep", remaps={"in": "m/a", "out": "m/c"}, pub_endpoint="inproc://t-c",
+                      local_topics=["m/a"])]
+    loops = [NodeLoop(s, _Keep, zctx) for s in specs]
+    wire_hand_over(loops)
+    for loop in loops:
+        loop.node.setup()
+    a, b, c = (loop.node for loop in loops)
+    try:
+        frame = MarkerFrame(header=MarkerFrame.make_header(7, 0.07, 1), labels=["x"],
+                            positions=np.zeros((1, 3), np.float32), flags=np.zeros(1, np.uint8))
+        a.ctx.publish("out", frame)
+        for _ in range(3):
+            for loop in loops:
+                loop.step({})
+        assert b.got == [frame] and c.got == [frame] and b.got[0] is c.got[0] is frame, "not the object itself"
+        assert frame.header.publisher == "a" and frame.header.seq == 1 and frame.header.frame == 7, \
+            "b or c restamped the message a handed them"
+        assert not frame.positions.flags.writeable
+        try:
+            b.got[0].positions[0, 0] = 1.0
+            raise AssertionError("a neighbour could write into a handed-over array")
+        except ValueError:
+            pass
+        assert b.ctx._sub_stats["m/a"].count == 1 and b.ctx._sub_stats["m/a"].drops == 0
+        assert b.ctx._pub_stats["m/b"].count == 1, "b's publish is counted even with nobody outside"
+        assert a.ctx.local_readers.keys() == {"m/a"} and not b.ctx.local_readers
+    finally:
+        for loop in loops:
+            loop.ctx.close()
+        zctx.term()
