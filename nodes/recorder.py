@@ -7,7 +7,6 @@ written (``drain_on_stop``); after SIGKILL everything but the last chunk is read
 from __future__ import annotations
 
 import platform
-import time
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -46,7 +45,7 @@ class Recorder(Node):
         raise AssertionError("the recorder stores raw bytes; see on_raw")
 
     def on_raw(self, wire_topic: str, payload: bytes, msg: Message) -> None:
-        self.bag.write(wire_topic, payload, time.time_ns(), int(msg.header.capture_time_s * 1e9))
+        self.bag.write(wire_topic, payload, self.ctx.received_ns, int(msg.header.capture_time_s * 1e9))
         if msg.SCHEMA == "mocap.MarkerSet":
             self.marker_set = msg
 

@@ -161,6 +161,8 @@ class NodeContext:
         self._outside: dict[str, bool] = {}  # wire topic -> has a subscriber beyond the process (cache)
         self.local_readers: dict[str, list[NodeContext]] = {}  # wire topic -> container neighbours
         self.inbox: collections.deque[tuple[str, Message]] = collections.deque()  # handed over, not yet handled
+        self.in_hand: Message | None = None  # the handed-over message being handled now (shared: not ours)
+        self.received_ns = 0  # when the message being handled arrived (before decoding: a bag's receive time)
         for cls in ALL_MESSAGES:  # (a node typed `Message`, like the recorder, may get any of them)
             prepare(cls)  # the first frame through a node should cost what every other one does
 
@@ -211,7 +213,9 @@ class NodeContext:
         n, end = 0, time.monotonic() + limit_s
         while time.monotonic() < end:
             try:
-                handle(self.sub.recv_multipart(_NOBLOCK))
+                frames = self.sub.recv_multipart(_NOBLOCK)
+                self.received_ns = time.time_ns()
+                handle(frames)
             except zmq.Again:
                 if not self.sub.poll(20):  # nothing for 20 ms: what was in flight has arrived
                     break
@@ -260,7 +264,7 @@ class NodeContext:
         graph-entry time are carried over from the message this one was computed from."""
         if self.pub is None:
             return
-        if msg.header.publisher:  # published before (a relay's): stamp a copy, others may hold this one
+        if msg is self.in_hand:  # a neighbour's message, republished: stamp a copy, others hold this one
             msg = copy.copy(msg)
             msg.__dict__["header"] = copy.copy(msg.header)
         # Written straight into the header's __dict__: pydantic's __setattr__ would cost ~10 us a message.
@@ -519,6 +523,7 @@ class NodeLoop:
             if not sub.getsockopt(zmq.EVENTS) & _POLLIN or time.monotonic() > batch_end:
                 break
             frames = sub.recv_multipart(_NOBLOCK)
+            ctx.received_ns = time.time_ns()
             if self.spec.keep_last and len(frames) == 2:
                 if frames[0] in newest:
                     ctx.skipped(frames[0])  # keep-last: an older frame nobody will see
@@ -613,6 +618,8 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
 
 
 def _handle_local(ctx: NodeContext, node: Node, wire: str, msg: Message, wants_bytes: bool) -> None:
+    ctx.in_hand = msg
+    ctx.received_ns = time.time_ns()
     try:
         if wants_bytes:
             node.on_raw(wire, encode(msg), msg)
@@ -620,6 +627,8 @@ def _handle_local(ctx: NodeContext, node: Node, wire: str, msg: Message, wants_b
             node.on_message(ctx._logical[wire], msg)
     except Exception as e:
         ctx.handler_error(ctx._logical[wire], e)
+    finally:
+        ctx.in_hand = None
 
 
 def _handle(ctx: NodeContext, node: Node, frames: list[bytes]) -> None:
