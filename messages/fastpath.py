@@ -97,7 +97,9 @@ def compile_model(cls: type[BaseModel]) -> _Compiled | None:
         return None
     ns: dict[str, Any] = {"_Reject": _Reject, "_ndarray": np.ndarray, "_cls": cls, "UNSET": msgspec.UNSET,
                           "_set": object.__setattr__}
-    struct_fields, body, names = [], ["def build(w):", "    given = set()"], []
+    required = [name for name, info in cls.model_fields.items() if info.is_required()]
+    struct_fields, body, names = [], ["def build(w):", f"    given = {{{', '.join(map(repr, required))}}}" if required
+                                      else "    given = set()"], []
     for k, (name, info) in enumerate(cls.model_fields.items()):
         compiled = _field(k, info.annotation, info.metadata, ns)
         if compiled is None:
@@ -107,8 +109,7 @@ def compile_model(cls: type[BaseModel]) -> _Compiled | None:
         body.append(f"    v = w.{key}")
         if info.is_required():
             struct_fields.append((key, wire_type))
-            body += ["    " + line for line in lines]
-            body.append(f"    given.add({name!r})")
+            body += ["    " + line for line in lines]  # (in ``given`` from the start: always there)
         else:
             default = info.get_default(call_default_factory=True)
             if not isinstance(default, _IMMUTABLE):

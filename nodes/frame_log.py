@@ -1,7 +1,6 @@
 """Writes one CSV line per received message (frame, seq, publisher, latency): a test and debugging sink."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict
@@ -28,7 +27,8 @@ class FrameLog(Node):
         self.file.write("frame,seq,publisher,schema,latency_us,estimated,held,missing\n")
 
     def on_message(self, topic, msg):
-        latency_us = (time.time_ns() - msg.header.entry_time_ns) / 1e3 if msg.header.entry_time_ns else ""
+        # Latency at arrival (before decoding), as a bare pyzmq sink measures it.
+        latency_us = (self.ctx.received_ns - msg.header.entry_time_ns) / 1e3 if msg.header.entry_time_ns else ""
         h = msg.header
         counts = ""
         status = getattr(msg, "status", None)

@@ -38,8 +38,8 @@ class SyntheticSource(Node):
                                                       rate_hz=p.rate_hz, source="synthetic"))
         t = self.frame / p.rate_hz
         pos = np.stack([np.cos(self.phase + t), np.sin(self.phase + t), np.full(p.markers, 1.0)], axis=1)
-        msg = MarkerFrame(header=MarkerFrame.make_header(self.frame, t, time.time_ns()), labels=self.labels,
+        msg = MarkerFrame(header=MarkerFrame.make_header(self.frame, t), labels=self.labels,
                           positions=pos.astype(np.float32), flags=np.zeros(p.markers, np.uint8))
-        self.ctx.publish("markers/raw", msg)
+        self.ctx.publish("markers/raw", msg)  # entry time stamped there, as the frame goes out
         self.frame += 1
         return 1.0 / p.rate_hz
