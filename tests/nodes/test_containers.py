@@ -122,17 +122,18 @@ def test_a_killed_container_is_restarted_with_all_its_nodes(tmp_path):
         assert took < 2.0 and not pid_alive(new)
 
 
-def test_studio_composed_is_studio_with_container_lines():
-    """launch/studio_composed.yaml must stay the same graph as launch/studio.yaml."""
-    plain = load_launch_file(REPO / "launch" / "studio.yaml")
-    composed = load_launch_file(REPO / "launch" / "studio_composed.yaml")
+@pytest.mark.parametrize("plain_name, source_kind", [("studio", "file_source"), ("qtm_studio", "qtm_ingest")])
+def test_a_composed_studio_file_is_its_plain_twin_with_container_lines(plain_name, source_kind):
+    """launch/<name>_composed.yaml must stay the same graph as launch/<name>.yaml."""
+    plain = load_launch_file(REPO / "launch" / f"{plain_name}.yaml")
+    composed = load_launch_file(REPO / "launch" / f"{plain_name}_composed.yaml")
     assert [n.model_dump(exclude={"container"}) for n in plain.nodes] == \
            [n.model_dump(exclude={"container"}) for n in composed.nodes]
     kinds = {n.kind: n.container for n in composed.nodes}
-    assert kinds["file_source"] is None and kinds["viewer"] is None
-    assert {n.container for n in composed.nodes if n.kind in ("ik_gapfill", "retarget", "hip_interpolation")} == \
-           {"core"}
-    assert re.search(r"container: core", (REPO / "launch" / "studio_composed.yaml").read_text())
+    assert kinds[source_kind] is None and kinds["viewer"] is None
+    assert {n.container for n in composed.nodes if n.kind in ("ik_gapfill", "retarget", "hip_interpolation",
+                                                              "joint_localization")} == {"core"}
+    assert re.search(r"container: core", (REPO / "launch" / f"{plain_name}_composed.yaml").read_text())
 
 
 def test_compose_gives_a_composed_graph_one_service_per_node():
