@@ -48,6 +48,19 @@ def wait_for(predicate, timeout_s: float = 10.0, what: str = "condition"):
     raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
+def log_rows(path: Path) -> list[dict]:
+    """The rows of a frame_log CSV that may still be being written: complete lines only (a buffered
+    file is flushed in pieces), none while even the header line is incomplete."""
+    import csv
+
+    try:
+        text = Path(path).read_text()
+    except FileNotFoundError:
+        return []
+    complete = text[: text.rfind("\n") + 1]
+    return list(csv.DictReader(complete.splitlines())) if complete else []
+
+
 def pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)

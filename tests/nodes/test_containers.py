@@ -1,6 +1,5 @@
 """Containers: several nodes in one OS process, wired over inproc sockets (ROS 2's component containers).
 Real processes over real sockets, as everywhere else."""
-import csv
 import os
 import re
 import signal
@@ -15,7 +14,7 @@ from mocap_cli.launch_file import LaunchError, load_launch_file
 from mocap_cli.launcher import group, plan
 from nodes.runtime import Node, NodeLoop, wire_hand_over
 from nodes.spec import NodeSpec
-from tests.conftest import launched, pid_alive, wait_for
+from tests.conftest import launched, log_rows, pid_alive, wait_for
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -45,8 +44,7 @@ nodes:
 
 
 def read_frames(path):
-    with open(path) as f:
-        return [int(r["frame"]) for r in csv.DictReader(f)]
+    return [int(r["frame"]) for r in log_rows(path)]
 
 
 def chain_file(tmp_path, **kw):

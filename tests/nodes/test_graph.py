@@ -1,9 +1,8 @@
 """Real processes over real sockets: the launcher, readiness, restarts, shutdown, bad input."""
-import csv
 import os
 import signal
 
-from tests.conftest import launched, pid_alive, wait_for
+from tests.conftest import launched, log_rows, pid_alive, wait_for
 
 SMOKE = """
 nodes:
@@ -21,8 +20,7 @@ nodes:
 
 
 def read_frames(path):
-    with open(path) as f:
-        return [int(r["frame"]) for r in csv.DictReader(f)]
+    return [int(r["frame"]) for r in log_rows(path)]
 
 
 def test_graph_delivers_every_frame_after_readiness(tmp_path):

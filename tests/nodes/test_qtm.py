@@ -14,7 +14,7 @@ import numpy as np
 import qtm_rt
 
 from mocap_core.recordings import read_recording
-from tests.conftest import REPO, data_file, launched, wait_for
+from tests.conftest import REPO, data_file, launched, log_rows, wait_for
 
 TAKE = "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"  # real gaps: NaN must come through
 
@@ -134,10 +134,7 @@ nodes:
 """
 
     def count():
-        if not out.exists():
-            return 0
-        with open(out) as f:
-            return sum(1 for _ in csv.DictReader(f))
+        return len(log_rows(out))
 
     with launched(tmp_path, graph) as g:
         with emulator(tmp_path, "--loop", port=port) as (sim, _):
