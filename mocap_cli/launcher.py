@@ -330,6 +330,8 @@ class Launcher:
             while not self.stop_requested:
                 if poller.poll(50):
                     self._on_control()
+                if self.stop_requested:  # Ctrl-C reaches the nodes too: their exits are no deaths
+                    break
                 now = time.monotonic()
                 self._maybe_start(now)
                 self._watch(now)

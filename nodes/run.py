@@ -53,7 +53,10 @@ def main(argv: list[str] | None = None) -> int:
         warm_up()
         if len(argv) == 2:
             _tell_launcher_warm(argv[1])
-        line = sys.stdin.readline()
+        try:
+            line = sys.stdin.readline()
+        except KeyboardInterrupt:  # Ctrl-C reaches the whole process group; a spare holds nothing
+            return 0
         if not line.strip():
             return 0
         argv = [line]
