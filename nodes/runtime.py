@@ -472,10 +472,10 @@ class NodeLoop:
                 ctx.log.info("source finished")
                 return False
             self.next_tick = max(self.next_tick + delay, now - 0.05)  # keep cadence, never race to catch up
-        # Read the SUB socket whether or not poll named it: in a container, a frame an upstream node
-        # published a moment ago in this same pass is already here (inproc), so it goes on at once.
+        # Read whether or not poll named the SUB socket: in a container, what an upstream node handed
+        # over a moment ago in this same pass is in the inbox (or, for heartbeats, on inproc) already.
         if ctx.subscribes:
-            self._read_sub(ctx.sub in events)  # (and the inbox of a container's hand-offs)
+            self._read_sub(ctx.sub in events)
         if ctx.pub is not None and ctx.pub in events:
             ctx.read_subscriptions()
         if self.control is not None and self.control in events:
