@@ -262,7 +262,9 @@ class NodeContext:
 
     def publish(self, topic: str, msg: Message, source: Message | None = None) -> None:
         """Send ``msg`` on a logical topic. With ``source``, the frame number, capture time and
-        graph-entry time are carried over from the message this one was computed from."""
+        graph-entry time are carried over from the message this one was computed from. A published
+        message belongs to its readers: in a container it is shared, not copied, and its arrays become
+        read-only, so give it arrays of its own (not views of a buffer the node keeps writing)."""
         if self.pub is None:
             return
         if msg is self.in_hand:  # a neighbour's message, republished: stamp a copy, others hold this one
