@@ -1,10 +1,11 @@
 """Soak (issue 10; not run in CI): the full graph fed by the QTM emulator at 1000 Hz for 10 minutes.
 Reports drops, throughput and each node's RSS at the start and the end (memory must stay flat).
 
-    python benchmarks/soak.py [--minutes 10] [--rate 1000] [--layout processes|one|two]
+    python benchmarks/soak.py [--minutes 10] [--rate 1000] [--layout one|processes|two]
 
---layout: one process per node (the default), the solving nodes in one container (launch/
-studio_composed.yaml), or in two containers (both cores of a 2-core machine at work).
+--layout: the solving nodes in one container (the default: launch/qtm_studio_composed.yaml, the
+layout for 1000 Hz), one process per node (launch/qtm_studio.yaml; about two cores' worth at
+1000 Hz), or two containers.
 """
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--minutes", type=float, default=10)
     ap.add_argument("--rate", type=float, default=1000)
-    ap.add_argument("--layout", choices=sorted(LAYOUTS), default="processes",
+    ap.add_argument("--layout", choices=sorted(LAYOUTS), default="one",
                     help="where the solving nodes run (mocap_cli/measure.py LAYOUTS)")
     args = ap.parse_args()
     sim, port = start_emulator(str(TAKE), "--rate", str(args.rate), "--loop", cwd=str(REPO))
