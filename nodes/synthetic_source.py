@@ -1,8 +1,6 @@
 """A source of synthetic marker frames: markers on circles, for wiring tests and benchmarks."""
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import csv
 import json
 import os
 import signal
@@ -51,8 +52,6 @@ def wait_for(predicate, timeout_s: float = 10.0, what: str = "condition"):
 def log_rows(path: Path) -> list[dict]:
     """The rows of a frame_log CSV that may still be being written: complete lines only (a buffered
     file is flushed in pieces), none while even the header line is incomplete."""
-    import csv
-
     try:
         text = Path(path).read_text()
     except FileNotFoundError:
