@@ -18,6 +18,7 @@ from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
+from mocap_core.segment_rebuild import REBUILD_HELP
 from mocap_core.warmup import warm_up
 
 REPO = Path(__file__).resolve().parents[1]
@@ -50,7 +51,8 @@ def add_parser(sub) -> None:
     g.add_argument("--take", default=DEFAULT_TAKE, help="recording (default: the BTK sprint start)")
     g.add_argument("--profile", default="btk_sprint")
     g.add_argument("--remove", default="elbow_l", help="joint(s) to hide, comma-separated (e.g. knee_l,ankle_l; "
-                   "pelvis hides every hip marker and reports the pelvis, spine0 and both hips)")
+                   "pelvis hides every hip marker and reports the pelvis, spine0 and both hips; a landmark name "
+                   "such as L_UOA hides that marker too)")
     g.add_argument("--from", dest="start_s", type=float, default=1.0, help="gap start, seconds (default 1)")
     g.add_argument("--to", dest="stop_s", type=float, help="gap end, seconds (default: the end of the take)")
     g.add_argument("--solvers", default="all", help="comma-separated, or all")
@@ -61,6 +63,7 @@ def add_parser(sub) -> None:
     g.add_argument("--no-plots", action="store_true")
     g.add_argument("--swivel", action="store_true", help=BEYOND_THESIS_HELP["swivel"])
     g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
+    g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
     g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
                    help=f"(with --remove pelvis) {WHEN_LOST_HELP}")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
@@ -148,7 +151,7 @@ def run_gaps(args) -> int:
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry},
-                            hips_lost=args.hips_lost))
+                            hips_lost=args.hips_lost, rebuild=args.rebuild))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -162,7 +165,8 @@ def run_gaps(args) -> int:
         w.writerows(rows)
     gap_s = (stop - start) / rec.rate_hz
     md = [f"{', '.join(joints)} hidden from {start / rec.rate_hz:.2f} s for {gap_s:.2f} s "
-          f"({stop - start} frames) of {rec.source.split('/')[-1]}; distance to the localized reference, metres.", "",
+          f"({stop - start} frames) of {rec.source.split('/')[-1]}; distance to the localized reference, metres.",
+          "", f"Options: {options_text(args)}.", "",
           "| removed by | solver | constraints | joint | min | max | mean | median | std | variance |",
           "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -191,6 +195,16 @@ def run_gaps(args) -> int:
                                 f"{joints[0]} ({mode}), constraints {'on' if constrained else 'off'}")
     log.info("wrote %s", out)
     return 0
+
+
+def options_text(args) -> str:
+    on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
+                                  ("--rebuild", args.rebuild)) if flag]
+    if args.reacquire_step:
+        on.append(f"--reacquire-step {args.reacquire_step}")
+    if args.hips_lost != "hold":
+        on.append(f"--hips-lost {args.hips_lost}")
+    return " ".join(on) or "none beyond the thesis"
 
 
 def run_latency(args) -> int:

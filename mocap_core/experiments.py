@@ -9,8 +9,9 @@ import numpy as np
 from mocap_core.gapfill import GapFiller
 from mocap_core.hip_interpolation import HIP_LANDMARKS, HipInterpolator
 from mocap_core.ik.solvers import SolverParams
+from mocap_core.localization import JOINT_LANDMARKS
 from mocap_core.pipeline import SkeletonPipeline
-from mocap_core.profiles import Profile
+from mocap_core.profiles import LANDMARK_INDEX, Profile
 from mocap_core.recordings import Recording
 from mocap_core.skeleton import END_SITES, INDEX, JOINTS, Status
 
@@ -92,25 +93,21 @@ def worst_case_timing(localized, solver: str, constraints: bool, params: SolverP
 
 
 # -- accuracy with gaps (thesis 4.2) ------------------------------------------------------------------------
-# The landmarks whose loss takes a joint away ("remove by markers"). Knee and ankle share the
-# regression markers, as in the thesis's biking test where both were lost together.
-JOINT_LANDMARKS = {
-    "elbow": ("HLE", "HME"), "wrist": ("RSP", "USP"), "hand": ("HM2",), "shoulder": ("SAE",),
-    "knee": ("FLE", "FME", "TTC"), "ankle": ("FAL", "TAM"), "foot": ("FCC",), "toe": ("FM2",),
-}
-
-
 # Joints that go with another's markers: the hip markers give the pelvis, spine0 and both hip centres.
 SEGMENT_OF = {"pelvis": ("pelvis", "spine0", "hip_l", "hip_r")}
 
 
 def landmarks_of(joint: str) -> list[str]:
+    """The landmarks whose loss takes a joint away ("remove by markers"); a landmark name (L_UOA) is
+    itself."""
     if joint == "pelvis":  # every hip marker
         return list(HIP_LANDMARKS)
+    if joint in LANDMARK_INDEX:
+        return [joint]
     base, _, side = joint.rpartition("_")
     if base not in JOINT_LANDMARKS or side not in ("l", "r"):
         raise ValueError(f"cannot remove {joint!r} by markers (joints: pelvis, "
-                         f"{', '.join(f'{j}_l/_r' for j in JOINT_LANDMARKS)})")
+                         f"{', '.join(f'{j}_l/_r' for j in JOINT_LANDMARKS)}; or a landmark such as L_UOA)")
     return [f"{side.upper()}_{name}" for name in JOINT_LANDMARKS[base]]
 
 
@@ -136,13 +133,14 @@ class GapRun:
 
 def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, joints: list[str], start: int,
             stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
-            fill_options: dict | None = None, hips_lost: str = "hold") -> GapRun:
-    """Hide ``joints`` in frames [start, stop) and fill them; compare with the complete take."""
+            fill_options: dict | None = None, hips_lost: str = "hold", rebuild: bool = False) -> GapRun:
+    """Hide ``joints`` (and landmarks named in it) in frames [start, stop) and fill them; compare
+    with the complete take. ``rebuild``: lost limb landmarks rebuilt from their segment's others."""
     from mocap_core.localization import Localizer
-    from mocap_core.profiles import LANDMARK_INDEX
+    from mocap_core.segment_rebuild import SegmentRebuilder
 
     hidden = joints
-    joints = [k for j in joints for k in SEGMENT_OF.get(j, (j,))]  # the pelvis's markers take its segment
+    joints = [k for j in joints if j not in LANDMARK_INDEX for k in SEGMENT_OF.get(j, (j,))]
     jidx = [INDEX[j] for j in joints]
     lm = landmarks.copy()
     if mode == "markers":
@@ -150,7 +148,8 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             for name in landmarks_of(j):
                 lm[start:stop, LANDMARK_INDEX[name]] = np.nan
     lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
-    loc = Localizer(profile.body).localize(lm)
+    lm, rebuilt = SegmentRebuilder().fill_landmarks(lm) if rebuild else (lm, None)
+    loc = Localizer(profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if mode == "joint":
         pos[start:stop, jidx] = np.nan

@@ -42,7 +42,18 @@ DEFAULT_HALF_SHOULDER_WIDTH_MM = 200.0
 # and the width fallbacks lean on the pelvis/chest lateral axis instead (blend up to +0.25).
 STRAIGHT_SIN = 0.17
 
-LOCATED, MISSING = int(Status.LOCATED), int(Status.MISSING)
+LOCATED, MISSING, ESTIMATED = int(Status.LOCATED), int(Status.MISSING), int(Status.ESTIMATED)
+# The landmarks that locate each limb joint (both sides), for `mocap eval gaps --remove` and for
+# reporting joints from rebuilt landmarks as estimated.
+JOINT_LANDMARKS = {
+    "elbow": ("HLE", "HME"), "wrist": ("RSP", "USP"), "hand": ("HM2",), "shoulder": ("SAE",),
+    "knee": ("FLE", "FME", "TTC"), "ankle": ("FAL", "TAM"), "foot": ("FCC",), "toe": ("FM2",),
+}
+JOINT_OF_LANDMARK = np.zeros((N_JOINTS, len(_L)), np.int64)  # joint x landmark: 1 = locates it
+for _base, _names in JOINT_LANDMARKS.items():
+    for _s in "LR":
+        for _name in _names:
+            JOINT_OF_LANDMARK[_J[f"{_base}_{_s.lower()}"], _L[f"{_s}_{_name}"]] = 1
 # Landmark and joint indices as plain ints, frozen into the compiled kernel.
 SACR, L_IAS, R_IAS, TV12, TV2, SME, SGL = (_L[n] for n in ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "SGL"))
 HEAD_MARK = np.array([_L["L_HEAD"], _L["R_HEAD"]])
@@ -90,7 +101,9 @@ class Localizer:
                                b.marker_diameter_mm / 2000, b.elbow_width_mm / 2000,
                                b.knee_width_mm / 2000, b.ankle_width_mm / 2000])
 
-    def localize(self, landmarks: np.ndarray) -> Localized:
+    def localize(self, landmarks: np.ndarray, rebuilt: np.ndarray | None = None) -> Localized:
+        """``rebuilt``: (F, n_landmarks) mask of landmarks that were rebuilt, not seen
+        (mocap_core.segment_rebuild); the joints they give are reported estimated, not located."""
         lm = np.ascontiguousarray(landmarks, dtype=np.float64)
         if lm.ndim == 2:
             lm = lm[None]
@@ -100,6 +113,8 @@ class Localizer:
         status = np.empty((n, N_JOINTS), np.uint8)
         body_used = np.empty((n, 4))
         _localize_batch(lm, pos, frames, status, body_used, self._body, self.estimate.sums, self.estimate.counts)
+        if rebuilt is not None and rebuilt.any():
+            status[((rebuilt.reshape(n, -1) @ JOINT_OF_LANDMARK.T) > 0) & (status == LOCATED)] = ESTIMATED
         return Localized(pos, frames, status, *body_used.T)
 
 

@@ -18,6 +18,7 @@ from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.localization import Localizer
 from mocap_core.profiles import Profile
+from mocap_core.segment_rebuild import SegmentRebuilder
 
 
 @dataclass
@@ -37,9 +38,11 @@ class SkeletonPipeline:
                  params: SolverParams | None = None, constraints: Constraints | None = None,
                  fill_gaps: bool = True, beyond: bool = False):
         """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
-        to the body when all are lost, swivel, segment carry, re-acquisition blend)."""
+        to the body when all are lost, lost forearm and foot landmarks rebuilt, swivel, segment carry,
+        re-acquisition blend)."""
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
+        self.rebuilder = SegmentRebuilder() if beyond and fill_gaps else None  # a gap fill too
         self.localizer = Localizer(profile.body)
         options = BEYOND_THESIS if beyond else {}
         self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
@@ -51,7 +54,10 @@ class SkeletonPipeline:
         return lm
 
     def solve_landmarks(self, landmarks: np.ndarray, start: int = 0) -> SolvedChunk:
-        loc = self.localizer.localize(landmarks)
+        rebuilt = None
+        if self.rebuilder is not None:  # lost forearm and foot landmarks from their segment
+            landmarks, rebuilt = self.rebuilder.fill_landmarks(landmarks)
+        loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:
             for f in range(len(pos)):

@@ -43,7 +43,13 @@ def _warm(part: str) -> None:
     from mocap_core.skeleton import N_JOINTS, Status
 
     if part == "localization":
+        from mocap_core.segment_rebuild import SegmentRebuilder
+
         Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
+        rebuilder, lm = SegmentRebuilder(), np.random.default_rng(0).normal(size=(len(LANDMARKS), 3))
+        rebuilder.fill(lm.copy())
+        lm[0] = np.nan
+        rebuilder.fill(lm)
         quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
         return
     solver, options = ("ccd", BEYOND_THESIS) if part == "beyond" else (part, {})

@@ -3,7 +3,7 @@
 Reads ``markers/raw`` (the recording's own labels) and publishes ``markers/filled``: one marker per
 landmark of the profile (the PAF names, mocap_core.profiles.LANDMARKS), so every later stage is
 independent of the marker set. Flags: measured, interpolated (the pelvis markers this node
-predicted) or missing.
+predicted, and with ``rebuild`` the forearm and foot landmarks it rebuilt) or missing.
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
 from mocap_core.profiles import LANDMARKS, load_profile
+from mocap_core.segment_rebuild import REBUILD_HELP, SegmentRebuilder
 from nodes.runtime import Node
 
 
@@ -21,6 +22,7 @@ class Params(BaseModel):
     profile: str = Field(description="marker-set profile name (profiles/) or YAML path")
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
     when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
+    rebuild: bool = Field(False, description=REBUILD_HELP)
 
 
 class HipInterpolation(Node):
@@ -32,6 +34,7 @@ class HipInterpolation(Node):
     def setup(self) -> None:
         self.profile = load_profile(self.params.profile)
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
+        self.rebuilder = SegmentRebuilder() if self.params.rebuild else None
         self.labels: list[str] | None = None
         self.map = None
 
@@ -43,7 +46,10 @@ class HipInterpolation(Node):
         lm = self.map.apply(msg.positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
+        rebuilt = self.rebuilder.fill(lm) if self.rebuilder is not None else None
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
+        if rebuilt is not None:
+            flags[rebuilt] = FLAG_INTERPOLATED
         self.ctx.publish("markers/filled", MarkerFrame(header=MarkerFrame.make_header(), labels=list(LANDMARKS),
                                                        positions=lm.astype(np.float32), flags=flags), source=msg)

@@ -1,0 +1,95 @@
+"""Lost forearm and foot landmarks rebuilt from the markers of their segment still seen."""
+import numpy as np
+
+from mocap_core.experiments import gap_run
+from mocap_core.gapfill import BEYOND_THESIS
+from mocap_core.localization import Localizer
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
+from mocap_core.recordings import read_recording
+from mocap_core.segment_rebuild import SegmentRebuilder
+from mocap_core.skeleton import INDEX, Status
+from tests.conftest import data_file
+
+FOREARM = [LANDMARK_INDEX[n] for n in ("L_HLE", "L_HME", "L_UOA", "L_RSP", "L_USP")]
+
+
+def rotation(axis, angle):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def test_a_lost_marker_follows_its_segments_rigid_motion_known_answer():
+    rng = np.random.default_rng(3)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    rebuilder = SegmentRebuilder()
+    assert not rebuilder.fill(first.copy()).any()  # nothing lost, nothing rebuilt
+    rot, shift = rotation([1, 2, 0.5], 0.7), np.array([0.3, -0.1, 1.2])
+    moved = first @ rot.T + shift
+    lost = moved.copy()
+    lost[LANDMARK_INDEX["L_HLE"]] = lost[LANDMARK_INDEX["L_HME"]] = np.nan
+    rebuilt = rebuilder.fill(lost)
+    assert set(np.flatnonzero(rebuilt)) == {LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]}
+    np.testing.assert_allclose(lost[FOREARM], moved[FOREARM], atol=1e-9)
+    np.testing.assert_array_equal(lost[~rebuilt], moved[~rebuilt])  # the seen ones are left alone
+
+
+def test_two_partners_are_not_enough_and_styloids_are_never_rebuilt():
+    rng = np.random.default_rng(4)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    rebuilder = SegmentRebuilder()
+    rebuilder.fill(first.copy())
+    lost = first.copy()
+    lost[[LANDMARK_INDEX[n] for n in ("L_HLE", "L_HME", "L_UOA")]] = np.nan  # the styloids alone are seen
+    assert not rebuilder.fill(lost).any() and np.isnan(lost[LANDMARK_INDEX["L_HLE"]]).all()
+    lost = first.copy()
+    lost[LANDMARK_INDEX["L_RSP"]] = np.nan  # a lost styloid: the IK stage's job (the radius turns)
+    assert not rebuilder.fill(lost).any()
+
+
+def test_nothing_is_rebuilt_before_the_segment_was_seen():
+    lm = np.random.default_rng(5).normal(size=(len(LANDMARKS), 3))
+    lm[LANDMARK_INDEX["L_FCC"]] = np.nan
+    assert not SegmentRebuilder().fill(lm).any()
+
+
+def test_joints_from_rebuilt_landmarks_are_estimated_not_located():
+    take = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
+    lm = load_profile("qualisys_sports").resolve(take.labels).apply(take.positions[:40])
+    lm[20:, LANDMARK_INDEX["L_FCC"]] = np.nan
+    filled, rebuilt = SegmentRebuilder().fill_landmarks(lm)
+    assert rebuilt[20:, LANDMARK_INDEX["L_FCC"]].all() and not rebuilt[:20].any()
+    loc = Localizer().localize(filled, rebuilt)
+    assert (loc.status[20:, INDEX["foot_l"]] == Status.ESTIMATED).all()
+    assert (loc.status[:20, INDEX["foot_l"]] == Status.LOCATED).all()
+    assert (loc.status[20:, INDEX["knee_l"]] == Status.LOCATED).all()
+
+
+def _gap(take, profile, joints, start_s, stop_s=None):
+    rec, prof = read_recording(data_file(take)), load_profile(profile)
+    pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
+    lm = pipe.landmark_map.apply(rec.positions)
+    reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
+    start = int(start_s * rec.rate_hz)
+    stop = rec.n_frames if stop_s is None else int(stop_s * rec.rate_hz)
+    return {rebuild: gap_run(lm, reference, prof, joints, start, stop, "ccd", True, "markers",
+                             fill_options=BEYOND_THESIS, rebuild=rebuild) for rebuild in (False, True)}
+
+
+def test_sprint_elbow_rebuilt_from_the_olecranon_and_styloids():
+    """The elbow's epicondyle markers hidden from 1 s to the end of the sprint: the olecranon and both
+    styloids carry them; the swivel alone (the shoulder from the acromion moves a lot) is twice as far."""
+    runs = _gap("03_sprint_start_BTK_SprintMotion.trc", "btk_sprint", ["elbow_l"], 1.0)
+    with_, without = runs[True].stats(), runs[False].stats()
+    assert with_["mean"] < 0.03 and with_["max"] < 0.1, with_
+    assert with_["mean"] < 0.6 * without["mean"] and with_["max"] < 0.5 * without["max"], (with_, without)
+    # the olecranon hidden too: two forearm markers leave the swivel free, so nothing is rebuilt
+    strict = _gap("03_sprint_start_BTK_SprintMotion.trc", "btk_sprint", ["elbow_l", "L_UOA"], 1.0)
+    assert strict[True].stats()["mean"] == strict[False].stats()["mean"]
+
+
+def test_walk_heel_rebuilt_from_malleoli_and_toe():
+    runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["foot_l"], 0.5, 1.5)
+    assert runs[True].stats()["mean"] < 0.01 and runs[True].stats()["max"] < 0.02, runs[True].stats()
+    assert runs[False].stats()["mean"] > 0.02  # carried with the shank, it was 30 mm off

@@ -1,0 +1,76 @@
+"""hip_interpolation with ``rebuild: true`` flags the landmarks it rebuilt, and joint_localization
+reports the joints they give as estimated (the two nodes in one container, in-process hand-over)."""
+import numpy as np
+import zmq
+
+from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame, SkeletonFrame
+from mocap_core.profiles import LANDMARK_INDEX
+from mocap_core.recordings import read_recording
+from mocap_core.skeleton import INDEX, Status
+from nodes.hip_interpolation import HipInterpolation
+from nodes.joint_localization import JointLocalization
+from nodes.runtime import Node, NodeLoop, wire_hand_over
+from nodes.skeleton_codec import from_message
+from nodes.spec import NodeSpec
+from tests.conftest import data_file
+
+
+class _Collect(Node):
+    kind = "collect"
+    subscribes = {"in": MarkerFrame}
+
+    def setup(self):
+        self.got = []
+
+    def on_message(self, topic, msg):
+        self.got.append(msg)
+
+
+class _CollectSkeletons(_Collect):
+    subscribes = {"in": SkeletonFrame}
+
+
+def test_rebuilt_heel_is_flagged_and_the_foot_joint_is_estimated():
+    take = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
+    heel = take.labels.index("L_FCC")
+    zctx = zmq.Context()
+    common = {"profile": "qualisys_sports"}
+    specs = [
+        (NodeSpec(id="hips", kind="hip_interpolation", params={**common, "rebuild": True},
+                  remaps={"markers/raw": "markers/raw"}, pub_endpoint="inproc://rb-hips"), HipInterpolation),
+        (NodeSpec(id="localize", kind="joint_localization", params=common, pub_endpoint="inproc://rb-loc",
+                  local_topics=["markers/filled"]), JointLocalization),
+        (NodeSpec(id="seen_markers", kind="collect", remaps={"in": "markers/filled"}, pub_endpoint="inproc://rb-c1",
+                  local_topics=["markers/filled"]), _Collect),
+        (NodeSpec(id="seen_joints", kind="collect", remaps={"in": "skeleton/localized"},
+                  pub_endpoint="inproc://rb-c2", local_topics=["skeleton/localized"]), _CollectSkeletons),
+    ]
+    loops = [NodeLoop(spec, cls, zctx) for spec, cls in specs]
+    wire_hand_over(loops)
+    for loop in loops:
+        loop.node.setup()
+    hips, _, markers, joints = (loop.node for loop in loops)
+    try:
+        for f in range(30):
+            pos = take.positions[f].astype(np.float32)
+            if f >= 10:
+                pos[heel] = np.nan
+            hips.on_message("markers/raw", MarkerFrame(header=MarkerFrame.make_header(f, f / take.rate_hz, 1),
+                                                       labels=take.labels, positions=pos,
+                                                       flags=np.zeros(len(take.labels), np.uint8)))
+            for _ in range(2):
+                for loop in loops:
+                    loop.step({})
+        assert len(markers.got) == 30 and len(joints.got) == 30
+        fcc = LANDMARK_INDEX["L_FCC"]
+        assert [m.flags[fcc] for m in markers.got] == [FLAG_MEASURED] * 10 + [FLAG_INTERPOLATED] * 20
+        assert all(np.isfinite(m.positions[fcc]).all() for m in markers.got)
+        status = np.array([from_message(j)[2] for j in joints.got])
+        assert (status[:10, INDEX["foot_l"]] == Status.LOCATED).all()
+        assert (status[10:, INDEX["foot_l"]] == Status.ESTIMATED).all()
+        assert (status[:, INDEX["knee_l"]] == Status.LOCATED).all()
+        assert FLAG_MISSING not in {int(m.flags[LANDMARK_INDEX["L_FAL"]]) for m in markers.got}
+    finally:
+        for loop in loops:
+            loop.ctx.close()
+        zctx.term()
