@@ -62,6 +62,11 @@ results-beyond: $(STAMP)
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove knee_l,ankle_l --from 0.5 --to 2.0 --constraints on --mode markers \
 		--swivel --segment-carry --reacquire-step 0.01 --report docs/results/knee_ankle_walk_beyond
+	$(BIN)/mocap eval gaps --remove elbow_l --from 1 --constraints on --mode markers \
+		--swivel --segment-carry --rebuild --reacquire-step 0.01 --report docs/results/elbow_sprint_rebuild
+	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
+		--remove foot_l --from 0.5 --to 1.5 --constraints on --mode markers \
+		--swivel --segment-carry --rebuild --reacquire-step 0.01 --report docs/results/heel_walk_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove pelvis --from 0.5 --to 2.0 --solvers ccd --constraints on --mode markers --hips-lost fit \
 		--report docs/results/pelvis_walk_fit
