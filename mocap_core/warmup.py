@@ -23,7 +23,7 @@ import numpy as np
 PACKAGE = Path(__file__).resolve().parent
 # Where "this checkout's kernels are compiled" is remembered (next to numba's own cache files).
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
-PARTS = ("localization", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")  # every solver (a test checks)
+PARTS = ("localization", "rebuild", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")  # every solver (a test checks)
 
 
 def warm_up(parts: tuple[str, ...] = PARTS) -> None:
@@ -34,22 +34,24 @@ def warm_up(parts: tuple[str, ...] = PARTS) -> None:
 
 
 def _warm(part: str) -> None:
-    """Run one part's kernels once: localization, or one solve on a chain with a missing middle
-    joint (a solver by name; "beyond": CCD with the analytic fills of BEYOND_THESIS)."""
+    """Run one part's kernels once: localization, the segment rebuild, or one solve on a chain with a
+    missing middle joint (a solver by name; "beyond": CCD with the analytic fills of BEYOND_THESIS)."""
     from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.localization import Localizer
-    from mocap_core.profiles import LANDMARKS
+    from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
     from mocap_core.skeleton import N_JOINTS, Status
 
-    if part == "localization":
+    if part == "rebuild":
         from mocap_core.segment_rebuild import SegmentRebuilder
 
-        Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
         rebuilder, lm = SegmentRebuilder(), np.random.default_rng(0).normal(size=(len(LANDMARKS), 3))
         rebuilder.fill(lm.copy())
-        lm[0] = np.nan
+        lm[LANDMARK_INDEX["L_HLE"]] = np.nan  # rebuilt: the Kabsch path (LAPACK's first call) runs now
         rebuilder.fill(lm)
+        return
+    if part == "localization":
+        Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
         quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
         return
     solver, options = ("ccd", BEYOND_THESIS) if part == "beyond" else (part, {})

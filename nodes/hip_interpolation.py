@@ -14,6 +14,7 @@ from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
 from mocap_core.profiles import LANDMARKS, load_profile
 from mocap_core.segment_rebuild import REBUILD_HELP, SegmentRebuilder
+from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 
 
@@ -35,6 +36,8 @@ class HipInterpolation(Node):
         self.profile = load_profile(self.params.profile)
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
         self.rebuilder = SegmentRebuilder() if self.params.rebuild else None
+        if self.rebuilder is not None:
+            warm_up(("rebuild",))  # its kernel loaded before ready, not on the first frame (0.65 s)
         self.labels: list[str] | None = None
         self.map = None
 
