@@ -26,7 +26,8 @@ def add_parser(sub) -> None:
     s.add_argument("--profile", required=True, help="marker-set profile: a name from profiles/ or a YAML path")
     s.add_argument("--solver", default="ccd", choices=sorted(SOLVERS), help="IK solver for gaps (default ccd)")
     s.add_argument("--no-constraints", action="store_true", help="solve without joint limits")
-    s.add_argument("--no-ik", action="store_true", help="localization only: leave missing joints missing (nothing rebuilt)")
+    s.add_argument("--no-ik", action="store_true",
+                   help="localization only: leave missing joints missing (nothing rebuilt)")
     s.add_argument("--thesis", action="store_true",
                    help="fill gaps exactly as the thesis did (default: with the improvements the studio launch files "
                         "use: hips fitted to the body, lost forearm and foot markers rebuilt, swivel, segment carry, "

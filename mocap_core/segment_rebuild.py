@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import mv
-from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
+from mocap_core.ik.kernels import mv, rigid_fit_first
+from mocap_core.profiles import LANDMARK_INDEX
 
 MIN_PARTNERS = 3
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, ankle, heel or toe marker rebuilt from the rigid "
@@ -71,26 +71,6 @@ def _seen(p):
 
 
 @njit(cache=True)
-def _kabsch(before, after, n):
-    """(R, t) with R before[i] + t ~ after[i], i < n (least squares)."""
-    cb, ca = np.zeros(3), np.zeros(3)
-    for i in range(n):
-        cb += before[i]
-        ca += after[i]
-    cb /= n
-    ca /= n
-    h = np.zeros((3, 3))
-    for i in range(n):
-        h += np.outer(before[i] - cb, after[i] - ca)
-    u, _, vt = np.linalg.svd(h)
-    rot = vt.T @ u.T
-    if np.linalg.det(rot) < 0:  # a reflection: flip the weakest axis
-        vt[2] *= -1.0
-        rot = vt.T @ u.T
-    return rot, ca - mv(rot, cb)
-
-
-@njit(cache=True)
 def rebuild_frame(lm, segments, rebuilt_count, reference, rebuilt):
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
@@ -124,6 +104,6 @@ def rebuild_frame(lm, segments, rebuilt_count, reference, rebuilt):
                     n += 1
             if n < MIN_PARTNERS:
                 continue
-            rot, t = _kabsch(before, after, n)
+            rot, t = rigid_fit_first(before, after, n)
             lm[seg[k]] = mv(rot, reference[s, k, k]) + t
             rebuilt[seg[k]] = True

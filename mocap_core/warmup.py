@@ -23,7 +23,8 @@ import numpy as np
 PACKAGE = Path(__file__).resolve().parent
 # Where "this checkout's kernels are compiled" is remembered (next to numba's own cache files).
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
-PARTS = ("localization", "rebuild", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")  # every solver (a test checks)
+# every solver among them (a test checks)
+PARTS = ("localization", "rebuild", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")
 
 
 def warm_up(parts: tuple[str, ...] = PARTS) -> None:

@@ -7,7 +7,6 @@ from __future__ import annotations
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import FLAG_INTERPOLATED, MarkerFrame, SkeletonFrame
-from mocap_core.hip_interpolation import HIP_INDEX
 from mocap_core.localization import Localizer
 from mocap_core.profiles import LANDMARKS, load_profile
 from mocap_core.warmup import warm_up
@@ -33,7 +32,6 @@ class JointLocalization(Node):
     def on_message(self, topic, msg: MarkerFrame) -> None:
         if msg.labels != list(LANDMARKS):
             raise ValueError("expected landmark frames from hip_interpolation (labels are the PAF landmarks)")
-        rebuilt = msg.flags == FLAG_INTERPOLATED
-        rebuilt[HIP_INDEX] = False  # the pelvis from predicted hip markers stays located (the thesis)
-        loc = self.localizer.localize(msg.positions[None], rebuilt[None])
+        # interpolated hip markers leave the pelvis located (the thesis): the limb table decides
+        loc = self.localizer.localize(msg.positions[None], (msg.flags == FLAG_INTERPOLATED)[None])
         self.ctx.publish("skeleton/localized", to_message(loc.positions[0], loc.frames[0], loc.status[0]), source=msg)

@@ -108,6 +108,27 @@ def rotation_between(a, b):
 
 
 @njit(cache=True)
+def rigid_fit_first(before, after, n):
+    """(R, t) with R before[i] + t ~ after[i] for the first n rows, least squares (Kabsch; the kernel
+    twin of geometry.rigid_fit, unweighted)."""
+    cb, ca = np.zeros(3), np.zeros(3)
+    for i in range(n):
+        cb += before[i]
+        ca += after[i]
+    cb /= n
+    ca /= n
+    h = np.zeros((3, 3))
+    for i in range(n):
+        h += np.outer(before[i] - cb, after[i] - ca)
+    u, _, vt = np.linalg.svd(h)
+    rot = vt.T @ u.T
+    if np.linalg.det(rot) < 0:  # a reflection: flip the weakest axis
+        vt[2] *= -1.0
+        rot = vt.T @ u.T
+    return rot, ca - mv(rot, cb)
+
+
+@njit(cache=True)
 def rotate_subchain(P, R, i, rot):
     """Rotate joints i+1.. about P[i], and bone frames i.. (the sub-chain that bone i carries)."""
     n = R.shape[0]
