@@ -70,3 +70,14 @@ results-beyond: $(STAMP)
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove pelvis --from 0.5 --to 2.0 --solvers ccd --constraints on --mode markers --hips-lost fit \
 		--report docs/results/pelvis_walk_fit
+	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
+		--remove knee_l,ankle_l --from 0.5 --to 2.0 --constraints on --mode markers \
+		--swivel --segment-carry --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_walk_rebuild
+	$(BIN)/mocap eval gaps --remove knee_l,ankle_l --from 1 --to 2.5 --constraints on --mode markers \
+		--swivel --segment-carry --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_sprint_rebuild
+	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
+		--remove elbow_l --from 0.3 --constraints on --mode markers \
+		--swivel --segment-carry --rebuild --reacquire-step 0.01 --report docs/results/elbow_walk_rebuild
+	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
+		--remove elbow_l --from 1 --to 20 --constraints on --mode markers \
+		--swivel --segment-carry --rebuild --reacquire-step 0.01 --report docs/results/elbow_karate_rebuild

@@ -151,7 +151,9 @@ def run_gaps(args) -> int:
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry},
-                            hips_lost=args.hips_lost, rebuild=args.rebuild))
+                            hips_lost=args.hips_lost, rebuild=args.rebuild,
+                            tracking=pipe.landmark_map.tracking(rec.positions),
+                            tracking_of=pipe.landmark_map.tracking_of))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []

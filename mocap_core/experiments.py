@@ -133,9 +133,12 @@ class GapRun:
 
 def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, joints: list[str], start: int,
             stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
-            fill_options: dict | None = None, hips_lost: str = "hold", rebuild: bool = False) -> GapRun:
+            fill_options: dict | None = None, hips_lost: str = "hold", rebuild: bool = False,
+            tracking: np.ndarray | None = None, tracking_of: tuple[str, ...] = ()) -> GapRun:
     """Hide ``joints`` (and landmarks named in it) in frames [start, stop) and fill them; compare
-    with the complete take. ``rebuild``: lost limb landmarks rebuilt from their segment's others."""
+    with the complete take. ``rebuild``: lost limb landmarks rebuilt from their segment's others and
+    from the profile's tracking markers (``tracking``, frames x markers x 3; ``tracking_of``: the
+    segment of each, LandmarkMap.tracking_of), which stay seen."""
     from mocap_core.localization import Localizer
     from mocap_core.segment_rebuild import SegmentRebuilder
 
@@ -148,7 +151,7 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             for name in landmarks_of(j):
                 lm[start:stop, LANDMARK_INDEX[name]] = np.nan
     lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
-    lm, rebuilt = SegmentRebuilder().fill_landmarks(lm) if rebuild else (lm, None)
+    lm, rebuilt = SegmentRebuilder(tracking_of).fill_landmarks(lm, tracking) if rebuild else (lm, None)
     loc = Localizer(profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if mode == "joint":

@@ -42,7 +42,7 @@ class SkeletonPipeline:
         re-acquisition blend)."""
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
-        self.rebuilder = SegmentRebuilder() if beyond and fill_gaps else None  # a gap fill too
+        self.rebuilder = SegmentRebuilder(self.landmark_map.tracking_of) if beyond and fill_gaps else None
         self.localizer = Localizer(profile.body)
         options = BEYOND_THESIS if beyond else {}
         self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
@@ -53,10 +53,15 @@ class SkeletonPipeline:
         lm, _ = self.hips.fill_landmarks(lm)
         return lm
 
-    def solve_landmarks(self, landmarks: np.ndarray, start: int = 0) -> SolvedChunk:
+    def solve_landmarks(self, landmarks: np.ndarray, start: int = 0, tracking: np.ndarray | None = None
+                        ) -> SolvedChunk:
+        """``tracking``: the profile's tracking markers of the same frames (landmark_map.tracking), which
+        help rebuild lost limb landmarks (the rebuild is a gap fill: on with ``beyond`` and ``fill_gaps``)."""
         rebuilt = None
-        if self.rebuilder is not None:  # lost forearm and foot landmarks from their segment
-            landmarks, rebuilt = self.rebuilder.fill_landmarks(landmarks)
+        if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
+            if tracking is None:
+                tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
+            landmarks, rebuilt = self.rebuilder.fill_landmarks(landmarks, tracking)
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:
@@ -66,4 +71,5 @@ class SkeletonPipeline:
 
     def run(self, markers: np.ndarray, chunk: int = 250) -> Iterator[SolvedChunk]:
         for start in range(0, len(markers), chunk):
-            yield self.solve_landmarks(self.landmarks(markers[start:start + chunk]), start)
+            part = markers[start:start + chunk]
+            yield self.solve_landmarks(self.landmarks(part), start, self.landmark_map.tracking(part))

@@ -10,6 +10,8 @@ strip_prefixes: true    # "male:LFWT" -> "LFWT" (actor/subject prefixes)
 landmarks:              # PAF landmark -> one label, or mean(A, B, ...)
   SACR: mean(LBWT, RBWT)
   L_IAS: LFWT
+tracking:               # optional: markers on one bone that no landmark names (clusters, wands)
+  L_forearm: [LFRM]     # they help rebuild that bone's lost landmarks (hip_interpolation rebuild)
 body:                   # measurements the fallbacks need (defaults shown)
   height_cm: null       # null = estimate from the markers
   elbow_width_mm: 70
@@ -21,7 +23,7 @@ Resolving a profile against a label list gives a :class:`LandmarkMap`, which tur
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -35,6 +37,8 @@ _SIDED = ("SAE", "HLE", "HME", "UOA", "RSP", "USP", "HM2", "PAS", "FLE", "FME", 
 LANDMARKS: tuple[str, ...] = ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "SGL") + tuple(
     f"{side}_{name}" for name in _SIDED for side in SIDES)
 LANDMARK_INDEX = {name: i for i, name in enumerate(LANDMARKS)}
+# Bones whose extra markers a profile may list under ``tracking`` (mocap_core.segment_rebuild uses them).
+TRACKING_SEGMENTS: tuple[str, ...] = tuple(f"{side}_{bone}" for bone in ("forearm", "shank", "foot") for side in SIDES)
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 _MEAN = re.compile(r"^mean\((.*)\)$")
 
@@ -62,6 +66,7 @@ class Profile(BaseModel):
     up_axis: Literal["x", "y", "z"] = "z"
     strip_prefixes: bool = True
     landmarks: dict[str, str]
+    tracking: dict[str, list[str]] = {}  # segment (L_forearm, ...) -> labels of markers on that bone
     body: BodyMeasurements = BodyMeasurements()
     source_file: str = ""
     lines: dict[str, int] = {}  # landmark -> line in the YAML file, for error messages
@@ -82,7 +87,14 @@ class Profile(BaseModel):
                 raise ProfileError(f"{self.where(landmark)}: label {missing[0]} of {landmark} is not in the "
                                    f"recording (labels: {shown})")
             rows.append((LANDMARK_INDEX[landmark], [index[n] for n in names]))
-        return LandmarkMap.build(rows, n_labels=len(labels))
+        tracking = []
+        for segment, names in self.tracking.items():
+            missing = [n for n in names if n not in index]
+            if missing:
+                raise ProfileError(f"{self.where()}: tracking marker {missing[0]} of {segment} is not in the "
+                                   f"recording")
+            tracking += [(segment, index[n]) for n in names]
+        return LandmarkMap.build(rows, n_labels=len(labels), tracking=tracking)
 
 
 def strip_prefix(label: str) -> str:
@@ -100,21 +112,31 @@ def parse_expression(expr: str, where: str) -> list[str]:
 
 @dataclass
 class LandmarkMap:
-    """Landmark i = mean of markers idx[i, :count[i]]; landmarks the profile lacks stay NaN."""
+    """Landmark i = mean of markers idx[i, :count[i]]; landmarks the profile lacks stay NaN. The
+    profile's tracking markers are kept apart: ``tracking_idx`` are their labels, ``tracking_of``
+    the segment of each."""
 
     idx: np.ndarray     # (n_landmarks, k) int; padding points at the all-zero row appended at n_labels
     count: np.ndarray   # (n_landmarks,) float; 0 for an absent landmark
     n_labels: int
+    tracking_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    tracking_of: tuple[str, ...] = ()
 
     @classmethod
-    def build(cls, rows: list[tuple[int, list[int]]], n_labels: int) -> "LandmarkMap":
+    def build(cls, rows: list[tuple[int, list[int]]], n_labels: int,
+              tracking: list[tuple[str, int]] = ()) -> "LandmarkMap":
         k = max((len(r) for _, r in rows), default=1)
         idx = np.full((len(LANDMARKS), k), n_labels, np.int64)
         count = np.zeros(len(LANDMARKS))
         for li, markers in rows:
             idx[li, : len(markers)] = markers
             count[li] = len(markers)
-        return cls(idx, count, n_labels)
+        return cls(idx, count, n_labels, np.array([i for _, i in tracking], np.int64),
+                   tuple(segment for segment, _ in tracking))
+
+    def tracking(self, markers: np.ndarray) -> np.ndarray:
+        """markers (..., n_labels, 3) -> the tracking markers (..., n_tracking, 3), float64."""
+        return markers[..., self.tracking_idx, :].astype(np.float64)
 
     def present(self) -> set[str]:
         return {LANDMARKS[i] for i in np.flatnonzero(self.count)}
@@ -163,4 +185,8 @@ def load_profile(name_or_path: str | Path) -> Profile:
             raise ProfileError(f"{profile.where(landmark)}: unknown landmark {landmark!r} "
                                f"(landmarks: {', '.join(LANDMARKS)})")
         parse_expression(expr, profile.where(landmark))
+    for segment in profile.tracking:
+        if segment not in TRACKING_SEGMENTS:
+            raise ProfileError(f"{profile.where()}: unknown tracking segment {segment!r} "
+                               f"(segments: {', '.join(TRACKING_SEGMENTS)})")
     return profile

@@ -8,60 +8,97 @@ segment's seen markers, from the last frame they were seen with it, carries it:
 - forearm: the humeral epicondyles sit on the elbow's flexion axis, which the ulna turns about, so
   they keep their place among the forearm's markers (olecranon, both styloids; the styloids are
   partners only);
-- foot: the malleoli sit on the ankle's hinge, so they keep their place among heel and toe.
+- foot: the malleoli sit on the ankle's hinge, so they keep their place among heel and toe;
+- shank: the femoral epicondyles sit on the knee's flexion axis, which the tibia turns about, so they
+  (and the tibial tuberosity) keep their place among the malleoli (partners only) and the shank's
+  tracking markers.
+
+A profile's ``tracking`` markers (wands and clusters that no landmark names, e.g. the Qualisys set's
+forearm and shank wands) join their bone as partners: the sets without an olecranon marker can then
+rebuild an elbow too.
 
 A landmark is rebuilt only from at least ``MIN_PARTNERS`` markers of its segment seen both now and
 in its reference frame: two leave the rotation about their line free (the forearm's swivel, which
-the IK stage's swivel option handles). Segments tried and left out, because they made the fills
-worse on the recordings: the shank (epicondyles, tibia, malleoli: a lost ankle came out 45 mm off
-where the foot's carry gives 4 mm) and the hand with the forearm (a wrist flexes).
+the IK stage's swivel option handles). Tried and left out, because they made the fills worse on the
+recordings: the malleoli rebuilt from the shank (a lost ankle came out 45 mm off where the foot's
+carry gives 4 mm) and the hand with the forearm (a wrist flexes).
 """
 from __future__ import annotations
+
+from typing import Sequence
 
 import numpy as np
 from numba import njit
 
 from mocap_core.ik.kernels import mv, rigid_fit_first
-from mocap_core.profiles import LANDMARK_INDEX
+from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 
 MIN_PARTNERS = 3
-REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, ankle, heel or toe marker rebuilt from the rigid "
-                "motion of at least 3 markers of its forearm or foot still seen")
-# Rigid bodies of landmarks: (rebuilt when lost, partners only). The styloids only help: rebuilt
-# from the elbow's markers, a lost wrist came out 27 mm off on the sprint where the IK stage's
-# swivel gives 13 mm (the radius turns about the ulna).
+REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
+                "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
+                "tracking markers)")
+# Rigid bodies of landmarks: (bone, rebuilt when lost, partners only), in the order they are rebuilt:
+# the shank's partners include the malleoli the foot may have rebuilt just before. The profile's
+# tracking markers of a bone (wands, clusters) join it as partners. The styloids only help: rebuilt
+# from the elbow's markers, a lost wrist came out 27 mm off on the sprint where the IK stage's swivel
+# gives 13 mm (the radius turns about the ulna). The malleoli are never rebuilt from the shank: a
+# lost ankle came out 45 mm off on the sprint that way, where the foot gives 2 mm.
 SEGMENTS = (
-    (("HLE", "HME", "UOA"), ("RSP", "USP")),   # forearm: the elbow's axis, the olecranon, the styloids
-    (("FAL", "TAM", "FCC", "FM2"), ()),        # foot: the ankle's axis (malleoli), heel and toe
+    ("forearm", ("HLE", "HME", "UOA"), ("RSP", "USP")),  # the elbow's axis, the olecranon, the styloids
+    ("foot", ("FAL", "TAM", "FCC", "FM2"), ()),          # the ankle's axis (malleoli), heel and toe
+    ("shank", ("FLE", "FME", "TTC"), ("FAL", "TAM")),    # the knee's axis, the tibia, the ankle's axis
 )
-WIDTH = max(len(a) + len(b) for a, b in SEGMENTS)
-# (segments x WIDTH) landmark indices, the rebuilt ones first, -1 padding; both sides
-SEGMENT_INDEX = np.array([[LANDMARK_INDEX[f"{side}_{name}"] for name in a + b] + [-1] * (WIDTH - len(a) - len(b))
-                          for side in ("L", "R") for a, b in SEGMENTS], dtype=np.int64)
-REBUILT_COUNT = np.array([len(a) for side in ("L", "R") for a, _ in SEGMENTS], dtype=np.int64)
+
+
+def segment_table(tracking_of: Sequence[str] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """(segments x width) point indices, the rebuilt ones first, -1 padding, and the rebuilt count
+    of each. Points are the landmarks, then the tracking markers (``tracking_of``: the segment of each,
+    e.g. "L_forearm")."""
+    rows, counts = [], []
+    for side in ("L", "R"):
+        for bone, rebuilt, partners in SEGMENTS:
+            extra = [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == f"{side}_{bone}"]
+            rows.append([LANDMARK_INDEX[f"{side}_{name}"] for name in rebuilt + partners] + extra)
+            counts.append(len(rebuilt))
+    width = max(map(len, rows))
+    return (np.array([r + [-1] * (width - len(r)) for r in rows], np.int64), np.array(counts, np.int64))
 
 
 class SegmentRebuilder:
-    """Fills lost limb landmarks frame by frame. Keep one per actor: it owns the reference frames."""
+    """Fills lost limb landmarks frame by frame. Keep one per actor: it owns the reference frames.
+    ``tracking_of``: the segment of each tracking marker passed to :meth:`fill` (LandmarkMap.tracking_of)."""
 
-    def __init__(self):
+    def __init__(self, tracking_of: Sequence[str] = ()):
+        self.segments, self.rebuilt_count = segment_table(tracking_of)
+        self.n_tracking = len(tracking_of)
+        width = self.segments.shape[1]
         # per segment and member: where the segment's markers were the last time that member was
         # seen with at least MIN_PARTNERS of the others (NaN rows: not seen then)
-        self.reference = np.full((len(SEGMENT_INDEX), WIDTH, WIDTH, 3), np.nan)
+        self.reference = np.full((len(self.segments), width, width, 3), np.nan)
 
-    def fill(self, landmarks: np.ndarray) -> np.ndarray:
-        """One frame of landmarks (n_landmarks, 3) float64, NaN = lost: fill what can be rebuilt, in
-        place; returns the mask of rebuilt landmarks."""
-        rebuilt = np.zeros(len(landmarks), np.bool_)
-        rebuild_frame(landmarks, SEGMENT_INDEX, REBUILT_COUNT, self.reference, rebuilt)
-        return rebuilt
+    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray:
+        """One frame of landmarks (n_landmarks, 3) float64, NaN = lost, and of the tracking markers
+        (n_tracking, 3): fill what can be rebuilt, in place; returns the mask of rebuilt landmarks."""
+        points = landmarks
+        if self.n_tracking:
+            if tracking is None or len(tracking) != self.n_tracking:
+                raise ValueError(f"expected {self.n_tracking} tracking markers, got "
+                                 f"{'none' if tracking is None else len(tracking)}")
+            points = np.concatenate([landmarks, tracking])
+        rebuilt = np.zeros(len(points), np.bool_)
+        rebuild_frame(points, self.segments, self.rebuilt_count, self.reference, rebuilt)
+        if points is not landmarks:
+            landmarks[:] = points[:len(landmarks)]
+        return rebuilt[:len(landmarks)]
 
-    def fill_landmarks(self, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Landmark frames (F, n_landmarks, 3) -> filled copy and the (F, n_landmarks) rebuilt mask."""
+    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Landmark frames (F, n_landmarks, 3) and tracking frames (F, n_tracking, 3) -> filled copy of
+        the landmarks and the (F, n_landmarks) rebuilt mask."""
         out = np.array(landmarks, dtype=np.float64, copy=True)
         mask = np.zeros(out.shape[:2], bool)
         for f in range(out.shape[0]):
-            mask[f] = self.fill(out[f])
+            mask[f] = self.fill(out[f], None if tracking is None else tracking[f])
         return out, mask
 
 

@@ -3,7 +3,8 @@
 Reads ``markers/raw`` (the recording's own labels) and publishes ``markers/filled``: one marker per
 landmark of the profile (the PAF names, mocap_core.profiles.LANDMARKS), so every later stage is
 independent of the marker set. Flags: measured, interpolated (the pelvis markers this node
-predicted, and with ``rebuild`` the forearm and foot landmarks it rebuilt) or missing.
+predicted, and with ``rebuild`` the forearm, foot and shank landmarks it rebuilt, with the help of
+the profile's tracking markers) or missing.
 """
 from __future__ import annotations
 
@@ -35,8 +36,8 @@ class HipInterpolation(Node):
     def setup(self) -> None:
         self.profile = load_profile(self.params.profile)
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
-        self.rebuilder = SegmentRebuilder() if self.params.rebuild else None
-        if self.rebuilder is not None:
+        self.rebuilder = None  # made when the profile is resolved: it needs the tracking markers' layout
+        if self.params.rebuild:
             warm_up(("rebuild",))  # its kernel loaded before ready, not on the first frame (0.65 s)
         self.labels: list[str] | None = None
         self.map = None
@@ -45,11 +46,15 @@ class HipInterpolation(Node):
         if msg.labels != self.labels:  # first frame, or the marker set changed: resolve again
             self.map = self.profile.resolve(msg.labels)  # a ProfileError is counted and logged by the runtime
             self.labels = msg.labels
+            if self.params.rebuild:
+                self.rebuilder = SegmentRebuilder(self.map.tracking_of)
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
         lm = self.map.apply(msg.positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
-        rebuilt = self.rebuilder.fill(lm) if self.rebuilder is not None else None
+        rebuilt = None
+        if self.rebuilder is not None:
+            rebuilt = self.rebuilder.fill(lm, self.map.tracking(msg.positions))
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from mocap_core.profiles import LANDMARK_INDEX, ProfileError, load_profile
+from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, ProfileError, load_profile
 from mocap_core.recordings import RecordingError, read_recording
 from tests.conftest import data_file
 
@@ -75,3 +75,18 @@ def test_profile_errors_name_the_line(tmp_path):
         load_profile(p)
     with pytest.raises(ProfileError, match="shipped profiles: .*cmu41"):
         load_profile("no_such_profile")
+
+
+def test_tracking_markers_are_resolved_apart_from_the_landmarks(tmp_path):
+    p = tmp_path / "mine.yaml"
+    p.write_text("name: mine\nlandmarks:\n  SACR: SACR\ntracking:\n  L_forearm: [FRM]\n  R_shank: [SHN1, SHN2]\n")
+    lmap = load_profile(p).resolve(["SHN2", "SACR", "FRM", "SHN1"])
+    assert lmap.tracking_of == ("L_forearm", "R_shank", "R_shank")
+    frame = np.arange(12.0).reshape(1, 4, 3)
+    np.testing.assert_array_equal(lmap.tracking(frame)[0], frame[0, [2, 3, 0]])
+    assert lmap.apply(frame).shape[1] == len(LANDMARKS)  # the landmarks are unchanged by them
+    with pytest.raises(ProfileError, match="tracking marker SHN2 of R_shank is not in the recording"):
+        load_profile(p).resolve(["SACR", "FRM", "SHN1"])
+    p.write_text("name: mine\nlandmarks:\n  SACR: SACR\ntracking:\n  L_thigh: [THI]\n")
+    with pytest.raises(ProfileError, match="unknown tracking segment 'L_thigh'.*L_forearm"):
+        load_profile(p)

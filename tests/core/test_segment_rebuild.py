@@ -1,5 +1,6 @@
 """Lost forearm and foot landmarks rebuilt from the markers of their segment still seen."""
 import numpy as np
+import pytest
 
 from mocap_core.experiments import gap_run
 from mocap_core.gapfill import BEYOND_THESIS
@@ -48,6 +49,33 @@ def test_two_partners_are_not_enough_and_styloids_are_never_rebuilt():
     assert not rebuilder.fill(lost).any()
 
 
+def test_tracking_markers_join_their_bone_known_answer():
+    """Only the two styloids and one forearm tracking marker are seen: with the tracking marker the elbow
+    is rebuilt exactly; without it two partners are not enough. The shank rebuilds the knee from the
+    malleoli and its own tracking marker."""
+    rng = np.random.default_rng(6)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    tracking_of = ("L_forearm", "L_shank", "R_foot")
+    tracks = rng.normal(scale=0.1, size=(3, 3))
+    rebuilder = SegmentRebuilder(tracking_of)
+    rebuilder.fill(first.copy(), tracks.copy())
+    rot, shift = rotation([0.2, -1, 0.4], 1.1), np.array([-0.5, 0.2, 0.9])
+    moved, moved_tracks = first @ rot.T + shift, tracks @ rot.T + shift
+    lost = moved.copy()
+    gone = [LANDMARK_INDEX[n] for n in ("L_HLE", "L_HME", "L_UOA", "L_FLE", "L_FME", "L_TTC")]
+    lost[gone] = np.nan
+    rebuilt = rebuilder.fill(lost, moved_tracks.copy())
+    assert set(np.flatnonzero(rebuilt)) == set(gone)
+    np.testing.assert_allclose(lost[gone], moved[gone], atol=1e-9)
+    plain = SegmentRebuilder()
+    plain.fill(first.copy())
+    lost = moved.copy()
+    lost[gone] = np.nan
+    assert not plain.fill(lost).any()
+    with pytest.raises(ValueError, match="3 tracking markers"):
+        rebuilder.fill(moved.copy())
+
+
 def test_nothing_is_rebuilt_before_the_segment_was_seen():
     lm = np.random.default_rng(5).normal(size=(len(LANDMARKS), 3))
     lm[LANDMARK_INDEX["L_FCC"]] = np.nan
@@ -74,7 +102,9 @@ def _gap(take, profile, joints, start_s, stop_s=None):
     start = int(start_s * rec.rate_hz)
     stop = rec.n_frames if stop_s is None else int(stop_s * rec.rate_hz)
     return {rebuild: gap_run(lm, reference, prof, joints, start, stop, "ccd", True, "markers",
-                             fill_options=BEYOND_THESIS, rebuild=rebuild) for rebuild in (False, True)}
+                             fill_options=BEYOND_THESIS, rebuild=rebuild,
+                             tracking=pipe.landmark_map.tracking(rec.positions),
+                             tracking_of=pipe.landmark_map.tracking_of) for rebuild in (False, True)}
 
 
 def test_sprint_elbow_rebuilt_from_the_olecranon_and_styloids():
@@ -93,3 +123,19 @@ def test_walk_heel_rebuilt_from_malleoli_and_toe():
     runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["foot_l"], 0.5, 1.5)
     assert runs[True].stats()["mean"] < 0.01 and runs[True].stats()["max"] < 0.02, runs[True].stats()
     assert runs[False].stats()["mean"] > 0.02  # carried with the shank, it was 30 mm off
+
+
+def test_walk_knee_and_ankle_rebuilt_from_the_shank_and_foot_tracking_markers():
+    """Issue 9's knee+ankle target (30 mm): the malleoli come back from heel and metatarsals, then the
+    knee's markers from the malleoli, the fibula head and the shank's wand."""
+    runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["knee_l", "ankle_l"], 0.5, 2.0)
+    knee, ankle = runs[True].stats(0), runs[True].stats(1)
+    assert knee["mean"] < 0.02 and knee["max"] < 0.05 and ankle["mean"] < 0.01, (knee, ankle)
+    assert runs[False].stats(0)["mean"] > 0.025  # the swivel alone: 33 mm
+
+
+def test_walk_elbow_rebuilt_with_the_forearm_wand():
+    """The Qualisys set has no olecranon marker: the forearm's wand is the third partner."""
+    runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["elbow_l"], 0.3)
+    assert runs[True].stats()["mean"] < 0.01 and runs[True].stats()["max"] < 0.02, runs[True].stats()
+    assert runs[False].stats()["mean"] > 0.015  # the swivel alone: 18 mm

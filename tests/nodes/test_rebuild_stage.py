@@ -1,6 +1,7 @@
 """hip_interpolation with ``rebuild: true`` flags the landmarks it rebuilt, and joint_localization
 reports the joints they give as estimated (the two nodes in one container, in-process hand-over)."""
 import numpy as np
+import pytest
 import zmq
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame, SkeletonFrame
@@ -30,9 +31,13 @@ class _CollectSkeletons(_Collect):
     subscribes = {"in": SkeletonFrame}
 
 
-def test_rebuilt_heel_is_flagged_and_the_foot_joint_is_estimated():
+@pytest.mark.parametrize("lost, joint", [
+    (["L_FCC"], "foot_l"),                   # from the malleoli and the toe
+    (["L_FLE", "L_FME", "L_TTC"], "knee_l"),  # from the malleoli and the shank's tracking markers (raw labels)
+])
+def test_rebuilt_landmarks_are_flagged_and_their_joint_is_estimated(lost, joint):
     take = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
-    heel = take.labels.index("L_FCC")
+    hidden = [take.labels.index(name) for name in lost]  # the Qualisys labels are the landmark names
     zctx = zmq.Context()
     common = {"profile": "qualisys_sports"}
     specs = [
@@ -54,7 +59,7 @@ def test_rebuilt_heel_is_flagged_and_the_foot_joint_is_estimated():
         for f in range(30):
             pos = take.positions[f].astype(np.float32)
             if f >= 10:
-                pos[heel] = np.nan
+                pos[hidden] = np.nan
             hips.on_message("markers/raw", MarkerFrame(header=MarkerFrame.make_header(f, f / take.rate_hz, 1),
                                                        labels=take.labels, positions=pos,
                                                        flags=np.zeros(len(take.labels), np.uint8)))
@@ -62,13 +67,18 @@ def test_rebuilt_heel_is_flagged_and_the_foot_joint_is_estimated():
                 for loop in loops:
                     loop.step({})
         assert len(markers.got) == 30 and len(joints.got) == 30
-        fcc = LANDMARK_INDEX["L_FCC"]
-        assert [m.flags[fcc] for m in markers.got] == [FLAG_MEASURED] * 10 + [FLAG_INTERPOLATED] * 20
-        assert all(np.isfinite(m.positions[fcc]).all() for m in markers.got)
+        for name in lost:
+            k = LANDMARK_INDEX[name]
+            assert [m.flags[k] for m in markers.got] == [FLAG_MEASURED] * 10 + [FLAG_INTERPOLATED] * 20
+            assert all(np.isfinite(m.positions[k]).all() for m in markers.got)
+            # within 2 cm of where the marker really was (skin moves over the bones)
+            assert max(np.linalg.norm(m.positions[k] - take.positions[f, take.labels.index(name)])
+                       for f, m in enumerate(markers.got)) < 0.02
         status = np.array([from_message(j)[2] for j in joints.got])
-        assert (status[:10, INDEX["foot_l"]] == Status.LOCATED).all()
-        assert (status[10:, INDEX["foot_l"]] == Status.ESTIMATED).all()
-        assert (status[:, INDEX["knee_l"]] == Status.LOCATED).all()
+        assert (status[:10, INDEX[joint]] == Status.LOCATED).all()
+        assert (status[10:, INDEX[joint]] == Status.ESTIMATED).all()
+        other = "knee_l" if joint == "foot_l" else "foot_l"
+        assert (status[:, INDEX[other]] == Status.LOCATED).all()
         assert FLAG_MISSING not in {int(m.flags[LANDMARK_INDEX["L_FAL"]]) for m in markers.got}
     finally:
         for loop in loops:
