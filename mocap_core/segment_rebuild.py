@@ -48,20 +48,37 @@ SEGMENTS = (
     ("foot", ("FAL", "TAM", "FCC", "FM2"), ()),          # the ankle's axis (malleoli), heel and toe
     ("shank", ("FLE", "FME", "TTC"), ("FAL", "TAM")),    # the knee's axis, the tibia, the ankle's axis
 )
+# A joint's epicondyles belong to the bone above as well: once the forearm's motion has put them, they
+# are moved to keep their learned distances to that bone's tracking markers (bone lengths are constant,
+# and skin slides over the forearm: its fit's rotation errors grow towards the elbow). Sprint elbow
+# joint: 22 / 74 mm from the forearm alone, 12 / 40 mm with the upper arm's two markers.
+ALSO_ON = {"forearm": (("HLE", "HME"), "upper_arm")}
+DISTANCE_RATE = 1 / 100  # how fast a learned distance follows the frames where both points are measured
+DISTANCE_PRIOR = 0.1     # weight of the rigid estimate against the distances (per squared metre)
 
 
-def segment_table(tracking_of: Sequence[str] = ()) -> tuple[np.ndarray, np.ndarray]:
-    """(segments x width) point indices, the rebuilt ones first, -1 padding, and the rebuilt count
-    of each. Points are the landmarks, then the tracking markers (``tracking_of``: the segment of each,
-    e.g. "L_forearm")."""
+def segment_table(tracking_of: Sequence[str] = ()) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Point indices per segment (segments x width; the rebuilt members first, then the partners and the
+    bone's tracking markers, then the points used for distances only; -1 padding), and per segment how
+    many are rebuilt, how many move rigidly with it, and how many of the first are refined by distances.
+    Points are the landmarks, then the tracking markers (``tracking_of``: the segment of each, e.g.
+    "L_forearm")."""
+    def tracks(name):
+        return [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == name]
+
     rows, counts = [], []
     for side in ("L", "R"):
         for bone, rebuilt, partners in SEGMENTS:
-            extra = [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == f"{side}_{bone}"]
-            rows.append([LANDMARK_INDEX[f"{side}_{name}"] for name in rebuilt + partners] + extra)
-            counts.append(len(rebuilt))
+            rigid = [LANDMARK_INDEX[f"{side}_{name}"] for name in rebuilt + partners] + tracks(f"{side}_{bone}")
+            refined, above = ALSO_ON.get(bone, ((), ""))
+            distance_only = tracks(f"{side}_{above}") if above else []
+            assert rebuilt[:len(refined)] == refined  # the refined ones lead the rebuilt ones
+            rows.append(rigid + distance_only)
+            counts.append((len(rebuilt), len(rigid), len(refined) if distance_only else 0))
     width = max(map(len, rows))
-    return (np.array([r + [-1] * (width - len(r)) for r in rows], np.int64), np.array(counts, np.int64))
+    table = np.array([r + [-1] * (width - len(r)) for r in rows], np.int64)
+    rebuilt_count, rigid_count, refined_count = (np.array(c, np.int64) for c in zip(*counts))
+    return table, rebuilt_count, rigid_count, refined_count
 
 
 class SegmentRebuilder:
@@ -69,12 +86,14 @@ class SegmentRebuilder:
     ``tracking_of``: the segment of each tracking marker passed to :meth:`fill` (LandmarkMap.tracking_of)."""
 
     def __init__(self, tracking_of: Sequence[str] = ()):
-        self.segments, self.rebuilt_count = segment_table(tracking_of)
+        self.segments, self.rebuilt_count, self.rigid_count, self.refined_count = segment_table(tracking_of)
         self.n_tracking = len(tracking_of)
         width = self.segments.shape[1]
         # per segment and member: where the segment's markers were the last time that member was
         # seen with at least MIN_PARTNERS of the others (NaN rows: not seen then)
         self.reference = np.full((len(self.segments), width, width, 3), np.nan)
+        # per segment, refined member and point: their learned distance (NaN: never measured together)
+        self.distance = np.full((len(self.segments), width, width), np.nan)
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost, and of the tracking markers
@@ -86,7 +105,8 @@ class SegmentRebuilder:
                                  f"{'none' if tracking is None else len(tracking)}")
             points = np.concatenate([landmarks, tracking])
         rebuilt = np.zeros(len(points), np.bool_)
-        rebuild_frame(points, self.segments, self.rebuilt_count, self.reference, rebuilt)
+        rebuild_frame(points, self.segments, self.rebuilt_count, self.rigid_count, self.refined_count,
+                      self.reference, self.distance, rebuilt)
         if points is not landmarks:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
@@ -108,39 +128,83 @@ def _seen(p):
 
 
 @njit(cache=True)
-def rebuild_frame(lm, segments, rebuilt_count, reference, rebuilt):
+def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, reference, distance, rebuilt):
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
     for s in range(segments.shape[0]):
-        seg = segments[s]
+        seg, rigid = segments[s], rigid_count[s]
         width, count = 0, 0
         for k in range(seg.shape[0]):
             if seg[k] < 0:
                 break
             width += 1
             seen[k] = _seen(lm[seg[k]])
-            if seen[k]:
+            if seen[k] and k < rigid:
                 count += 1
+        _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
         if count > MIN_PARTNERS:  # each seen member's reference: the segment as it is now
-            for k in range(width):
+            for k in range(rigid):
                 if seen[k]:
-                    for m in range(width):
+                    for m in range(rigid):
                         if seen[m]:
                             reference[s, k, m] = lm[seg[m]]
                         else:
                             reference[s, k, m] = np.nan
-        if count == width or count < MIN_PARTNERS:
+        if count == rigid or count < MIN_PARTNERS:
             continue
         for k in range(rebuilt_count[s]):
             if seen[k] or rebuilt[seg[k]] or not _seen(reference[s, k, k]):
                 continue
             n = 0
-            for m in range(width):
+            for m in range(rigid):
                 if seen[m] and _seen(reference[s, k, m]):
                     before[n], after[n] = reference[s, k, m], lm[seg[m]]
                     n += 1
             if n < MIN_PARTNERS:
                 continue
             rot, t = rigid_fit_first(before, after, n)
-            lm[seg[k]] = mv(rot, reference[s, k, k]) + t
+            p = mv(rot, reference[s, k, k]) + t
+            if k < refined_count[s]:
+                p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k])
+            lm[seg[k]] = p
             rebuilt[seg[k]] = True
+
+
+@njit(cache=True)
+def _learn_distances(lm, seg, width, refined, seen, rebuilt, distance):
+    """Follow each refined member's distance to every other point while both are measured."""
+    for k in range(refined):
+        if not seen[k] or rebuilt[seg[k]]:
+            continue
+        for m in range(width):
+            if m != k and seen[m] and not rebuilt[seg[m]]:
+                d = np.sqrt(((lm[seg[k]] - lm[seg[m]]) ** 2).sum())
+                old = distance[k, m]
+                distance[k, m] = d if np.isnan(old) else old + DISTANCE_RATE * (d - old)
+
+
+@njit(cache=True)
+def _keep_distances(p, lm, seg, rigid, width, seen, distance):
+    """Gauss-Newton: the point nearest the rigid estimate ``p`` (weight DISTANCE_PRIOR) that keeps its
+    learned distances to the seen points; unchanged unless a distance-only point is seen."""
+    usable = False
+    for m in range(rigid, width):
+        usable = usable or (seen[m] and not np.isnan(distance[m]))
+    if not usable:
+        return p
+    q = p.copy()
+    for _ in range(10):
+        a = DISTANCE_PRIOR * np.eye(3)
+        g = DISTANCE_PRIOR * (q - p)
+        for m in range(width):
+            if not seen[m] or np.isnan(distance[m]):
+                continue
+            v = q - lm[seg[m]]
+            n = np.sqrt((v ** 2).sum())
+            if n < 1e-9:
+                continue
+            j = v / n
+            a += np.outer(j, j)
+            g += j * (n - distance[m])
+        q = q - np.linalg.solve(a, g)
+    return q

@@ -46,10 +46,12 @@ def _warm(part: str) -> None:
     if part == "rebuild":
         from mocap_core.segment_rebuild import SegmentRebuilder
 
-        rebuilder, lm = SegmentRebuilder(), np.random.default_rng(0).normal(size=(len(LANDMARKS), 3))
-        rebuilder.fill(lm.copy())
-        lm[LANDMARK_INDEX["L_HLE"]] = np.nan  # rebuilt: the Kabsch path (LAPACK's first call) runs now
-        rebuilder.fill(lm)
+        rng = np.random.default_rng(0)
+        rebuilder = SegmentRebuilder(("L_upper_arm",))
+        lm, upper = rng.normal(size=(len(LANDMARKS), 3)), rng.normal(size=(1, 3))
+        rebuilder.fill(lm.copy(), upper)
+        lm[LANDMARK_INDEX["L_HLE"]] = np.nan  # rebuilt: Kabsch and the distances (LAPACK's first calls) run now
+        rebuilder.fill(lm, upper)
         return
     if part == "localization":
         Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
