@@ -34,6 +34,9 @@ from mocap_core.ik.kernels import mv, rigid_fit_first
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 
 MIN_PARTNERS = 3
+# Partners nearly on one line leave the rotation about it free (a toe marker between two metatarsal
+# markers, say): they must spread at least this far (RMS) from their best line.
+MIN_SPREAD_M = 0.01
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
                 "tracking markers)")
@@ -160,7 +163,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, refer
                 if seen[m] and _seen(reference[s, k, m]):
                     before[n], after[n] = reference[s, k, m], lm[seg[m]]
                     n += 1
-            if n < MIN_PARTNERS:
+            if n < MIN_PARTNERS or _spread(before, n) < MIN_SPREAD_M:
                 continue
             rot, t = rigid_fit_first(before, after, n)
             p = mv(rot, reference[s, k, k]) + t
@@ -168,6 +171,19 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, refer
                 p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k])
             lm[seg[k]] = p
             rebuilt[seg[k]] = True
+
+
+@njit(cache=True)
+def _spread(points, n):
+    """RMS distance of the first n points from their best line: near 0, the rotation about it is free."""
+    c = np.zeros(3)
+    for i in range(n):
+        c += points[i]
+    c /= n
+    scatter = np.zeros((3, 3))
+    for i in range(n):
+        scatter += np.outer(points[i] - c, points[i] - c)
+    return np.sqrt(max(np.linalg.eigvalsh(scatter)[1], 0.0) / n)
 
 
 @njit(cache=True)

@@ -102,6 +102,23 @@ def test_epicondyles_keep_their_learned_distances_to_the_upper_arm():
     assert rigid_off == pytest.approx(0.008) and off < 0.9 * rigid_off, (off, rigid_off)
 
 
+def test_partners_on_one_line_rebuild_nothing():
+    """Heel and malleoli lost: the toe landmark is the midpoint of the two metatarsal tracking markers,
+    so the three partners lie on one line and the foot's rotation about it is unknown."""
+    rng = np.random.default_rng(9)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    metatarsals = rng.normal(scale=0.05, size=(2, 3))
+    first[LANDMARK_INDEX["L_FM2"]] = metatarsals.mean(axis=0)
+    rebuilder = SegmentRebuilder(("L_foot", "L_foot"))
+    rebuilder.fill(first.copy(), metatarsals.copy())
+    lost = first.copy()
+    lost[[LANDMARK_INDEX[n] for n in ("L_FAL", "L_TAM", "L_FCC")]] = np.nan
+    assert not rebuilder.fill(lost, metatarsals.copy()).any()
+    lost = first.copy()
+    lost[[LANDMARK_INDEX[n] for n in ("L_FAL", "L_TAM")]] = np.nan  # with the heel: off the line
+    assert rebuilder.fill(lost, metatarsals.copy())[LANDMARK_INDEX["L_FAL"]]
+
+
 def test_nothing_is_rebuilt_before_the_segment_was_seen():
     lm = np.random.default_rng(5).normal(size=(len(LANDMARKS), 3))
     lm[LANDMARK_INDEX["L_FCC"]] = np.nan
