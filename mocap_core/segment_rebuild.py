@@ -35,8 +35,9 @@ from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 
 MIN_PARTNERS = 3
 # Partners nearly on one line leave the rotation about it free (a toe marker between two metatarsal
-# markers, say): they must spread at least this far (RMS) from their best line.
-MIN_SPREAD_M = 0.01
+# markers, say): they must spread at least this far (RMS) from their best line. (An elbow marker
+# with two wrist markers 6 cm apart spreads 7-9 mm: enough.)
+MIN_SPREAD_M = 0.005
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
                 "tracking markers)")
