@@ -87,14 +87,12 @@ class Profile(BaseModel):
                 raise ProfileError(f"{self.where(landmark)}: label {missing[0]} of {landmark} is not in the "
                                    f"recording (labels: {shown})")
             rows.append((LANDMARK_INDEX[landmark], [index[n] for n in names]))
-        tracking = []
-        for segment, names in self.tracking.items():
-            missing = [n for n in names if n not in index]
-            if missing:
-                raise ProfileError(f"{self.where()}: tracking marker {missing[0]} of {segment} is not in the "
-                                   f"recording")
-            tracking += [(segment, index[n]) for n in names]
-        return LandmarkMap.build(rows, n_labels=len(labels), tracking=tracking)
+        # Tracking markers only help: one the recording lacks is left out (and named), not an error.
+        tracking = [(segment, index[n]) for segment, names in self.tracking.items() for n in names if n in index]
+        absent = tuple(n for names in self.tracking.values() for n in names if n not in index)
+        lmap = LandmarkMap.build(rows, n_labels=len(labels), tracking=tracking)
+        lmap.absent_tracking = absent
+        return lmap
 
 
 def strip_prefix(label: str) -> str:
@@ -121,6 +119,7 @@ class LandmarkMap:
     n_labels: int
     tracking_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     tracking_of: tuple[str, ...] = ()
+    absent_tracking: tuple[str, ...] = ()  # the profile's tracking markers this recording lacks
 
     @classmethod
     def build(cls, rows: list[tuple[int, list[int]]], n_labels: int,

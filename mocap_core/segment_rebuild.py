@@ -15,7 +15,8 @@ segment's seen markers, from the last frame they were seen with it, carries it:
 
 A profile's ``tracking`` markers (wands and clusters that no landmark names, e.g. the Qualisys set's
 forearm and shank wands) join their bone as partners: the sets without an olecranon marker can then
-rebuild an elbow too.
+rebuild an elbow too. The upper arm's tracking markers then pull a rebuilt elbow epicondyle to its
+learned distances from them (``ALSO_ON``).
 
 A landmark is rebuilt only from at least ``MIN_PARTNERS`` markers of its segment seen both now and
 in its reference frame: two leave the rotation about their line free (the forearm's swivel, which

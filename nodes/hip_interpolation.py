@@ -48,6 +48,9 @@ class HipInterpolation(Node):
             self.labels = msg.labels
             if self.params.rebuild:
                 self.rebuilder = SegmentRebuilder(self.map.tracking_of)
+                if self.map.absent_tracking:
+                    self.log.warning("tracking markers %s of profile %s are not in the stream: rebuilt "
+                                     "without them", ", ".join(self.map.absent_tracking), self.profile.name)
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
         lm = self.map.apply(msg.positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
