@@ -146,14 +146,14 @@ def run_gaps(args) -> int:
     cons = {"on": [True], "off": [False], "both": [False, True]}[args.constraints]
     warm_up()
     runs = []
+    tracking = pipe.landmark_map.tracking(rec.positions)  # the same for every run
     combos = [(m, c, s) for m in modes for c in cons for s in solvers]
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
-                            tracking=pipe.landmark_map.tracking(rec.positions),
-                            tracking_of=pipe.landmark_map.tracking_of))
+                            tracking=tracking, tracking_of=pipe.landmark_map.tracking_of))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []

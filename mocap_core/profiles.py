@@ -38,7 +38,8 @@ LANDMARKS: tuple[str, ...] = ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "S
     f"{side}_{name}" for name in _SIDED for side in SIDES)
 LANDMARK_INDEX = {name: i for i, name in enumerate(LANDMARKS)}
 # Bones whose extra markers a profile may list under ``tracking`` (mocap_core.segment_rebuild uses them).
-TRACKING_SEGMENTS: tuple[str, ...] = tuple(f"{side}_{bone}" for bone in ("upper_arm", "forearm", "shank", "foot") for side in SIDES)
+TRACKING_BONES = ("upper_arm", "forearm", "shank", "foot")
+TRACKING_SEGMENTS: tuple[str, ...] = tuple(f"{side}_{bone}" for bone in TRACKING_BONES for side in SIDES)
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 _MEAN = re.compile(r"^mean\((.*)\)$")
 
@@ -90,9 +91,7 @@ class Profile(BaseModel):
         # Tracking markers only help: one the recording lacks is left out (and named), not an error.
         tracking = [(segment, index[n]) for segment, names in self.tracking.items() for n in names if n in index]
         absent = tuple(n for names in self.tracking.values() for n in names if n not in index)
-        lmap = LandmarkMap.build(rows, n_labels=len(labels), tracking=tracking)
-        lmap.absent_tracking = absent
-        return lmap
+        return LandmarkMap.build(rows, n_labels=len(labels), tracking=tracking, absent_tracking=absent)
 
 
 def strip_prefix(label: str) -> str:
@@ -123,7 +122,7 @@ class LandmarkMap:
 
     @classmethod
     def build(cls, rows: list[tuple[int, list[int]]], n_labels: int,
-              tracking: list[tuple[str, int]] = ()) -> "LandmarkMap":
+              tracking: list[tuple[str, int]] = (), absent_tracking: tuple[str, ...] = ()) -> "LandmarkMap":
         k = max((len(r) for _, r in rows), default=1)
         idx = np.full((len(LANDMARKS), k), n_labels, np.int64)
         count = np.zeros(len(LANDMARKS))
@@ -131,7 +130,7 @@ class LandmarkMap:
             idx[li, : len(markers)] = markers
             count[li] = len(markers)
         return cls(idx, count, n_labels, np.array([i for _, i in tracking], np.int64),
-                   tuple(segment for segment, _ in tracking))
+                   tuple(segment for segment, _ in tracking), absent_tracking)
 
     def tracking(self, markers: np.ndarray) -> np.ndarray:
         """markers (..., n_labels, 3) -> the tracking markers (..., n_tracking, 3), float64."""

@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from mocap_core.ik.kernels import mv, rigid_fit_first
-from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
+from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, TRACKING_BONES
 
 MIN_PARTNERS = 3
 # Partners nearly on one line leave the rotation about it free (a toe marker between two metatarsal
@@ -58,6 +58,7 @@ SEGMENTS = (
 # and skin slides over the forearm: its fit's rotation errors grow towards the elbow). Sprint elbow
 # joint: 22 / 74 mm from the forearm alone, 12 / 40 mm with the upper arm's two markers.
 ALSO_ON = {"forearm": (("HLE", "HME"), "upper_arm")}
+assert {bone for bone, _, _ in SEGMENTS} | {above for _, above in ALSO_ON.values()} <= set(TRACKING_BONES)
 DISTANCE_RATE = 1 / 100  # how fast a learned distance follows the frames where both points are measured
 DISTANCE_PRIOR = 0.1     # weight of the rigid estimate against the distances (per squared metre)
 
