@@ -2,6 +2,10 @@
 to a bare pyzmq PUB/SUB relay chain with the same hops, measured in the same run; and the codec's
 encode + decode + validate cost for a 35-marker frame.
 
+A third chain, "codec", is the bare loop with our codec in each relay (decode, validate, encode).
+It splits the runtime's ratio in two: what decoding costs a hop on this host (codec / bare), and
+what the runtime's own loop adds to that (runtime / codec).
+
     python benchmarks/transport.py [--frames 2000] [--rate 500]
 """
 from __future__ import annotations
@@ -20,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from messages import MarkerFrame, decode, encode  # noqa: E402
 from mocap_cli.launch_file import LaunchFile  # noqa: E402
-from mocap_cli.bare_chain import bare_chain  # noqa: E402
+from mocap_cli.bare_chain import bare_chain, codec_chain  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
 
 
@@ -57,21 +61,23 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=2000)
     ap.add_argument("--rate", type=float, default=500.0)
     ap.add_argument("--rounds", type=int, default=3,
-                    help="alternate runtime and bare chains this many times; the ratio uses the median p50 "
+                    help="alternate the runtime, codec and bare chains this many times; the ratio uses the median p50 "
                          "(the machine is shared: one round can land on another tenant's burst)")
     args = ap.parse_args()
     print(f"codec encode+decode+validate, 35-marker frame: {codec_cost():.1f} us (target <= 20 us)")
     print(f"\n{'hops':>4} {'round':>5} {'chain':<8} {'frames':>6} {'p50 us':>8} {'p99 us':>8} {'mean us':>8}")
     for hops in (1, 5):
-        p50s: dict[str, list[float]] = {"runtime": [], "bare": []}
+        chains = {"runtime": runtime_chain, "codec": codec_chain, "bare": bare_chain}
+        p50s: dict[str, list[float]] = {name: [] for name in chains}
         for r in range(args.rounds):
-            for name, chain in (("runtime", runtime_chain), ("bare", bare_chain)):
+            for name, chain in chains.items():
                 lat = chain(hops, args.frames, args.rate)
                 p50s[name].append(float(np.percentile(lat, 50)))
                 print(f"{hops:>4} {r + 1:>5} {name:<8} {len(lat):>6} {p50s[name][-1]:>8.0f} "
                       f"{np.percentile(lat, 99):>8.0f} {statistics.fmean(lat):>8.0f}")
-        rt, bare = statistics.median(p50s["runtime"]), statistics.median(p50s["bare"])
-        print(f"     median p50: runtime {rt:.0f} us, bare {bare:.0f} us, ratio {rt / bare:.2f} (target <= 1.5)")
+        rt, codec, bare = (statistics.median(p50s[name]) for name in chains)
+        print(f"     median p50: runtime {rt:.0f} us, codec {codec:.0f} us, bare {bare:.0f} us; ratio runtime / bare "
+              f"{rt / bare:.2f} (target <= 1.5); codec / bare {codec / bare:.2f}, runtime / codec {rt / codec:.2f}")
 
 
 if __name__ == "__main__":
