@@ -81,3 +81,9 @@ results-beyond: $(STAMP)
 	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
 		--remove elbow_l --from 1 --to 20 --constraints on --mode markers \
 		--swivel --segment-carry --rebuild --reacquire-step 0.01 --report docs/results/elbow_karate_rebuild
+	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
+		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
+		--swivel --segment-carry --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_dance_memory
+	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:walk1 \
+		--profile dance28 --remove knee_l,ankle_l --from 2 --constraints on --mode markers \
+		--swivel --segment-carry --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_walk1_memory

@@ -8,10 +8,14 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mocap_core.hip_interpolation import HIP_INDEX, HipInterpolator  # noqa: E402
 from mocap_core.localization import Localizer  # noqa: E402
+from mocap_core.pose_memory import CAPACITY, PoseMemory  # noqa: E402
+from mocap_core.profiles import LANDMARK_INDEX  # noqa: E402
 from mocap_core.profiles import load_profile  # noqa: E402
 from mocap_core.recordings import read_recording  # noqa: E402
 from mocap_core.warmup import warm_up  # noqa: E402
@@ -46,6 +50,27 @@ def main():
         print(f"  localization, one frame    {per_call_us(lambda i: loc.localize(lm[i]), n):7.1f}  (target <= 50)")
         batch = per_call_us(lambda i: loc.localize(lm), 1) / n
         print(f"  localization, batch of {n}  {batch:7.1f}")
+    pose_memory_cost()
+
+
+def pose_memory_cost():
+    """The pose memory full (CAPACITY poses a leg) and one knee and ankle recalled in every frame."""
+    rec = read_recording(DATA / "13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat", "dance1")
+    lmap = load_profile("dance28").resolve(rec.labels)
+    lm = lmap.apply(rec.positions)
+    memory = PoseMemory(lmap.present())
+    rng = np.random.default_rng(0)
+    for f in range(CAPACITY + 100):  # the take's poses, jittered so that every one is kept
+        frame = lm[f % len(lm)].copy()
+        frame[LANDMARK_INDEX["L_FM2"]] += rng.normal(0, 0.01, 3)
+        memory.fill(frame)
+    lost = lm.copy()
+    lost[:, [LANDMARK_INDEX["L_FLE"], LANDMARK_INDEX["L_FAL"]]] = np.nan
+    n = 300
+    seen = per_call_us(lambda i: memory.fill(lm[i].copy()), n)
+    recalled = per_call_us(lambda i: memory.fill(lost[i].copy()), n)
+    print(f"pose memory ({CAPACITY} poses a leg), us per frame: legs seen {seen:.1f}, "
+          f"one leg's knee and ankle recalled {recalled:.1f}")
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
+from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.segment_rebuild import REBUILD_HELP
 from mocap_core.warmup import warm_up
 
@@ -64,6 +65,7 @@ def add_parser(sub) -> None:
     g.add_argument("--swivel", action="store_true", help=BEYOND_THESIS_HELP["swivel"])
     g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
     g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
+    g.add_argument("--pose-memory", action="store_true", help=POSE_MEMORY_HELP)
     g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
                    help=f"(with --remove pelvis) {WHEN_LOST_HELP}")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
@@ -153,7 +155,8 @@ def run_gaps(args) -> int:
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
-                            tracking=tracking, tracking_of=pipe.landmark_map.tracking_of))
+                            tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
+                            pose_memory=args.pose_memory))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -201,7 +204,7 @@ def run_gaps(args) -> int:
 
 def options_text(args) -> str:
     on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
-                                  ("--rebuild", args.rebuild)) if flag]
+                                  ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory)) if flag]
     if args.reacquire_step:
         on.append(f"--reacquire-step {args.reacquire_step}")
     if args.hips_lost != "hold":

@@ -11,7 +11,7 @@ from mocap_core.hip_interpolation import HIP_LANDMARKS, HipInterpolator
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.localization import JOINT_LANDMARKS
 from mocap_core.pipeline import SkeletonPipeline
-from mocap_core.profiles import LANDMARK_INDEX, Profile
+from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, Profile
 from mocap_core.recordings import Recording
 from mocap_core.skeleton import END_SITES, INDEX, JOINTS, Status
 
@@ -134,12 +134,15 @@ class GapRun:
 def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, joints: list[str], start: int,
             stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
             fill_options: dict | None = None, hips_lost: str = "hold", rebuild: bool = False,
-            tracking: np.ndarray | None = None, tracking_of: tuple[str, ...] = ()) -> GapRun:
+            tracking: np.ndarray | None = None, tracking_of: tuple[str, ...] = (),
+            pose_memory: bool = False) -> GapRun:
     """Hide ``joints`` (and landmarks named in it) in frames [start, stop) and fill them; compare
     with the complete take. ``rebuild``: lost limb landmarks rebuilt from their segment's others and
     from the profile's tracking markers (``tracking``, frames x markers x 3; ``tracking_of``: the
-    segment of each, LandmarkMap.tracking_of), which stay seen."""
+    segment of each, LandmarkMap.tracking_of), which stay seen. ``pose_memory``: lost knee and ankle
+    landmarks from the take's earlier poses (mocap_core.pose_memory), after the rebuild."""
     from mocap_core.localization import Localizer
+    from mocap_core.pose_memory import PoseMemory
     from mocap_core.segment_rebuild import SegmentRebuilder
 
     hidden = joints
@@ -152,6 +155,10 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
                 lm[start:stop, LANDMARK_INDEX[name]] = np.nan
     lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
     lm, rebuilt = SegmentRebuilder(tracking_of).fill_landmarks(lm, tracking) if rebuild else (lm, None)
+    if pose_memory:  # the profile's landmarks: those the complete take has somewhere
+        present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
+        lm, remembered = PoseMemory(present).fill_landmarks(lm, rebuilt)
+        rebuilt = remembered if rebuilt is None else rebuilt | remembered
     loc = Localizer(profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if mode == "joint":

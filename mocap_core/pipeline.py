@@ -18,6 +18,7 @@ from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.localization import Localizer
 from mocap_core.profiles import Profile
+from mocap_core.pose_memory import PoseMemory
 from mocap_core.segment_rebuild import SegmentRebuilder
 
 
@@ -38,11 +39,12 @@ class SkeletonPipeline:
                  params: SolverParams | None = None, constraints: Constraints | None = None,
                  fill_gaps: bool = True, beyond: bool = False):
         """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
-        to the body when all are lost, lost forearm and foot landmarks rebuilt, swivel, segment carry,
-        re-acquisition blend)."""
+        to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles
+        from the pose memory, swivel, segment carry, re-acquisition blend)."""
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         self.rebuilder = SegmentRebuilder(self.landmark_map.tracking_of) if beyond and fill_gaps else None
+        self.memory = PoseMemory(self.landmark_map.present()) if beyond and fill_gaps else None
         self.localizer = Localizer(profile.body)
         options = BEYOND_THESIS if beyond else {}
         self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
@@ -62,6 +64,9 @@ class SkeletonPipeline:
             if tracking is None:
                 tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
             landmarks, rebuilt = self.rebuilder.fill_landmarks(landmarks, tracking)
+        if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
+            landmarks, recalled = self.memory.fill_landmarks(landmarks, rebuilt)
+            rebuilt = recalled if rebuilt is None else rebuilt | recalled
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:

@@ -24,7 +24,7 @@ PACKAGE = Path(__file__).resolve().parent
 # Where "this checkout's kernels are compiled" is remembered (next to numba's own cache files).
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
 # every solver among them (a test checks)
-PARTS = ("localization", "rebuild", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")
+PARTS = ("localization", "rebuild", "pose_memory", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")
 
 
 def warm_up(parts: tuple[str, ...] = PARTS) -> None:
@@ -35,8 +35,9 @@ def warm_up(parts: tuple[str, ...] = PARTS) -> None:
 
 
 def _warm(part: str) -> None:
-    """Run one part's kernels once: localization, the segment rebuild, or one solve on a chain with a
-    missing middle joint (a solver by name; "beyond": CCD with the analytic fills of BEYOND_THESIS)."""
+    """Run one part's kernels once: localization, the segment rebuild, the pose memory, or one solve on a
+    chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic fills of
+    BEYOND_THESIS)."""
     from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.localization import Localizer
@@ -52,6 +53,12 @@ def _warm(part: str) -> None:
         rebuilder.fill(lm.copy(), upper)
         lm[LANDMARK_INDEX["L_HLE"]] = np.nan  # rebuilt: Kabsch and the distances (LAPACK's first calls) run now
         rebuilder.fill(lm, upper)
+        return
+    if part == "pose_memory":  # one call compiles the whole kernel, recall included
+        from mocap_core.pose_memory import PoseMemory
+
+        lm = np.random.default_rng(0).normal(size=(len(LANDMARKS), 3))
+        PoseMemory(["SACR", "L_IAS", "R_IAS", "L_FM2", "L_FLE"]).fill(lm)
         return
     if part == "localization":
         Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))

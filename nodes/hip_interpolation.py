@@ -4,7 +4,8 @@ Reads ``markers/raw`` (the recording's own labels) and publishes ``markers/fille
 landmark of the profile (the PAF names, mocap_core.profiles.LANDMARKS), so every later stage is
 independent of the marker set. Flags: measured, interpolated (the pelvis markers this node
 predicted, and with ``rebuild`` the forearm, foot and shank landmarks it rebuilt, with the help of
-the profile's tracking markers) or missing.
+the profile's tracking markers; with ``pose_memory`` the knee and ankle landmarks it recalled from
+the take's earlier poses) or missing.
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
+from mocap_core.pose_memory import POSE_MEMORY_HELP, PoseMemory
 from mocap_core.profiles import LANDMARKS, load_profile
 from mocap_core.segment_rebuild import REBUILD_HELP, SegmentRebuilder
 from mocap_core.warmup import warm_up
@@ -25,6 +27,7 @@ class Params(BaseModel):
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
     when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
     rebuild: bool = Field(False, description=REBUILD_HELP)
+    pose_memory: bool = Field(False, description=POSE_MEMORY_HELP)
 
 
 class HipInterpolation(Node):
@@ -37,8 +40,11 @@ class HipInterpolation(Node):
         self.profile = load_profile(self.params.profile)
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
         self.rebuilder = None  # made when the profile is resolved: it needs the tracking markers' layout
+        self.memory = None     # likewise: it needs the landmarks the profile has
         if self.params.rebuild:
             warm_up(("rebuild",))  # its kernel loaded before ready, not on the first frame (0.65 s)
+        if self.params.pose_memory:
+            warm_up(("pose_memory",))
         self.labels: list[str] | None = None
         self.map = None
 
@@ -51,6 +57,8 @@ class HipInterpolation(Node):
                 if self.map.absent_tracking:
                     self.log.warning("tracking markers %s of profile %s are not in the stream: rebuilt "
                                      "without them", ", ".join(self.map.absent_tracking), self.profile.name)
+            if self.params.pose_memory:  # the poses remembered were of the old marker set's landmarks
+                self.memory = PoseMemory(self.map.present())
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
         lm = self.map.apply(msg.positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
@@ -58,6 +66,9 @@ class HipInterpolation(Node):
         rebuilt = None
         if self.rebuilder is not None:
             rebuilt = self.rebuilder.fill(lm, self.map.tracking(msg.positions))
+        if self.memory is not None:
+            recalled = self.memory.fill(lm, rebuilt)
+            rebuilt = recalled if rebuilt is None else rebuilt | recalled
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

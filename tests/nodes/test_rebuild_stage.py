@@ -84,3 +84,45 @@ def test_rebuilt_landmarks_are_flagged_and_their_joint_is_estimated(lost, joint)
         for loop in loops:
             loop.ctx.close()
         zctx.term()
+
+
+def test_recalled_knee_and_ankle_are_flagged_interpolated():
+    """hip_interpolation with ``pose_memory: true`` on the 28-marker dance set (nothing on shank or foot
+    to rebuild from): the knee and ankle markers come back from the poses seen before they were lost."""
+    take = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance1")
+    hidden = [take.labels.index(name) for name in ("Knee_L", "Ankle_L")]
+    zctx = zmq.Context()
+    specs = [
+        (NodeSpec(id="hips", kind="hip_interpolation", params={"profile": "dance28", "pose_memory": True},
+                  pub_endpoint="inproc://pm-hips"), HipInterpolation),
+        (NodeSpec(id="seen_markers", kind="collect", remaps={"in": "markers/filled"}, pub_endpoint="inproc://pm-c",
+                  local_topics=["markers/filled"]), _Collect),
+    ]
+    loops = [NodeLoop(spec, cls, zctx) for spec, cls in specs]
+    wire_hand_over(loops)
+    for loop in loops:
+        loop.node.setup()
+    hips, markers = (loop.node for loop in loops)
+    lost_from, frames = 300, 360
+    try:
+        for f in range(frames):
+            pos = take.positions[f].astype(np.float32)
+            if f >= lost_from:
+                pos[hidden] = np.nan
+            hips.on_message("markers/raw", MarkerFrame(header=MarkerFrame.make_header(f, f / take.rate_hz, 1),
+                                                       labels=take.labels, positions=pos,
+                                                       flags=np.zeros(len(take.labels), np.uint8)))
+            for loop in loops:
+                loop.step({})
+        assert len(markers.got) == frames
+        for name, label in (("L_FLE", "Knee_L"), ("L_FAL", "Ankle_L")):
+            k = LANDMARK_INDEX[name]
+            flags = [int(m.flags[k]) for m in markers.got]
+            assert flags == [FLAG_MEASURED] * lost_from + [FLAG_INTERPOLATED] * (frames - lost_from)
+            err = [np.linalg.norm(markers.got[f].positions[k] - take.positions[f, take.labels.index(label)])
+                   for f in range(lost_from, frames)]
+            assert max(err) < 0.1 and np.mean(err) < 0.05, (name, max(err), np.mean(err))
+    finally:
+        for loop in loops:
+            loop.ctx.close()
+        zctx.term()
