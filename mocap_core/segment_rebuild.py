@@ -31,7 +31,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import mv, rigid_fit_first
+from mocap_core.ik.kernels import mv, rigid_fit_first, vfinite
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, TRACKING_BONES
 
 MIN_PARTNERS = 3
@@ -129,11 +129,6 @@ class SegmentRebuilder:
 
 
 @njit(cache=True)
-def _seen(p):
-    return np.isfinite(p[0]) and np.isfinite(p[1]) and np.isfinite(p[2])
-
-
-@njit(cache=True)
 def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, reference, distance, rebuilt):
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
@@ -144,7 +139,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, refer
             if seg[k] < 0:
                 break
             width += 1
-            seen[k] = _seen(lm[seg[k]])
+            seen[k] = vfinite(lm[seg[k]])
             if seen[k] and k < rigid:
                 count += 1
         _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
@@ -159,11 +154,11 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, refer
         if count == rigid or count < MIN_PARTNERS:
             continue
         for k in range(rebuilt_count[s]):
-            if seen[k] or rebuilt[seg[k]] or not _seen(reference[s, k, k]):
+            if seen[k] or rebuilt[seg[k]] or not vfinite(reference[s, k, k]):
                 continue
             n = 0
             for m in range(rigid):
-                if seen[m] and _seen(reference[s, k, m]):
+                if seen[m] and vfinite(reference[s, k, m]):
                     before[n], after[n] = reference[s, k, m], lm[seg[m]]
                     n += 1
             if n < MIN_PARTNERS or _spread(before, n) < MIN_SPREAD_M:

@@ -43,6 +43,12 @@ def vdot(a, b):
 
 
 @njit(cache=True)
+def vfinite(v):
+    """All three coordinates finite (a point that is seen)."""
+    return np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])
+
+
+@njit(cache=True)
 def mv(M, v):
     """3x3 matrix times vector, written out (small fixed sizes beat BLAS calls)."""
     return np.array([M[0, 0] * v[0] + M[0, 1] * v[1] + M[0, 2] * v[2],

@@ -37,6 +37,36 @@ def _swinging_leg(frames: int, cycle: int) -> np.ndarray:
     return lm
 
 
+def _leg(swing: float) -> dict:
+    """The left leg's knee, ankle and toe (pelvis frame) at a swing angle (radians)."""
+    knee = np.array([0.1, 0.45 * np.sin(swing * 0.5), -0.45 * np.cos(swing * 0.5)])
+    ankle = knee + [0.0, 0.38 * np.sin(swing), -0.38 * np.cos(swing)]
+    return {"L_FLE": knee, "L_FAL": ankle, "L_FM2": ankle + [0.0, 0.15, -0.05]}
+
+
+def test_a_pose_only_the_other_leg_has_made_is_recalled_mirrored_known_answer():
+    """The right leg swings (the left's swing mirrored) while the left leg barely moves; then the left leg,
+    its markers lost, makes the right's swing: its own poses are all far, so it takes the right's."""
+    frames = 900
+    lm = np.full((frames, len(LANDMARKS), 3), np.nan)
+    for f in range(frames):
+        left = _leg(0.4 * np.sin(2 * np.pi * f / 300) if f >= 600 else 0.02 * np.sin(2 * np.pi * f / 30))
+        right = _leg(0.4 * np.sin(2 * np.pi * f / 300) if f < 600 else 0.0)
+        points = {"SACR": (0.0, -0.1, 0.0), "L_IAS": (0.12, 0.05, 0.0), "R_IAS": (-0.12, 0.05, 0.0), **left}
+        points.update({"R_" + name[2:]: p * [-1.0, 1.0, 1.0] for name, p in right.items()})
+        for name, p in points.items():
+            lm[f, LANDMARK_INDEX[name]] = np.asarray(p) + [0.0, 0.0, 1.0]
+    hidden = lm.copy()
+    left_leg = [LANDMARK_INDEX[n] for n in LEG]
+    hidden[600:, left_leg] = np.nan
+    both = PRESENT + ["R_FM2", "R_FLE", "R_FAL"]
+    filled, _ = PoseMemory(both).fill_landmarks(hidden)
+    err = np.linalg.norm(filled[650:] - lm[650:], axis=2)[:, left_leg]  # (once the first swing is under way)
+    alone, _ = PoseMemory(PRESENT).fill_landmarks(hidden)  # without the right leg's poses
+    err_alone = np.linalg.norm(alone[650:] - lm[650:], axis=2)[:, left_leg]
+    assert err.mean() < 0.01 and err.mean() < 0.2 * err_alone.mean(), (err.mean(), err_alone.mean())
+
+
 def test_a_repeated_motion_is_recalled_in_the_pelvis_frame_known_answer():
     truth = _swinging_leg(800, 400)
     hidden = truth.copy()
