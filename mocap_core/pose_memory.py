@@ -77,8 +77,8 @@ class PoseMemory:
         self.offsets = np.zeros((n, 2, CAPACITY, width, 3))  # and the targets' offsets then
         self.state = np.zeros((n, 2, 2), np.int64)           # poses kept, where the next one goes
         self.last_kept = np.full((n, 2, 3), np.inf)          # the toe of the last pose kept
-        self.last_seen = np.full((n, width, 3), np.nan)    # the offsets of the last frame seen whole
-        self.estimate = np.full((n, width, 3), np.nan)     # the smoothed offsets during a gap (NaN: none)
+        self.last_seen = np.full((n, width, 3), np.nan)      # the offsets of the last frame seen whole
+        self.estimate = np.full((n, width, 3), np.nan)       # the smoothed offsets during a gap (NaN: none)
         self._nothing_filled: np.ndarray | None = None
 
     def fill(self, landmarks: np.ndarray, filled: np.ndarray | None = None) -> np.ndarray:
