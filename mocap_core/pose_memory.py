@@ -8,16 +8,16 @@ what the actor has done before: while a leg is seen whole, its knee and ankle la
 remembered in the pelvis's frame, together with where the toe was. Once they are lost (and the toe
 and the pelvis are seen), they are put where the remembered poses whose toe was nearest had them
 (inverse-distance weighted mean), smoothed over frames, starting from the last pose seen so that
-nothing jumps when the markers go. The knee is remembered where it was in the pelvis's frame (the
-thigh keeps it near the hip), the ankle as its offset from the toe (the foot keeps it near the
-toe): on dance1 the other way round puts the knee 54 mm off instead of 37 and the ankle 66 instead
-of 57.
+nothing jumps when the markers go. The ankle goes as far from the toe as it was in those poses (the
+foot keeps it near the toe); the knee goes where they had it in the pelvis's frame (the thigh keeps
+it near the hip), moved by 30 % of how far the toe is from theirs (TOE_SHARE). On dance1 the knee
+in the pelvis's frame alone was 43 mm off, with 30 % of the toe's offset 28 mm.
 
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 pose of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
 leg what the other did before). Always pooled, they made the walks worse (the two legs' markers
-sit differently); as a fallback, dance1's knee goes from 43 to 33 mm and nothing gets worse by
-more than 4 mm.
+sit differently); as a fallback, dance1's knee went from 43 to 33 mm and nothing got worse by more
+than 4 mm.
 
 Issue 9's "bone lengths learned online from located frames", taken one step further: the whole
 leg's shape, learned from the same take. It never uses frames it has not seen (a live graph
@@ -36,8 +36,10 @@ from mocap_core.profiles import LANDMARK_INDEX
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
                     "toe nearest where it is now had them (for marker sets with nothing else left on shank and foot)")
 KEY = "FM2"                             # the toe: every profile has it
-PELVIS_TARGETS = ("FLE", "FME", "TTC")  # the knee's landmarks, remembered in the pelvis's frame
-TOE_TARGETS = ("FAL", "TAM")            # the ankle's, remembered as offsets from the toe
+# The knee's and the ankle's landmarks, and how much of the toe's offset from the remembered poses'
+# toes each takes along (0: where the poses had it in the pelvis's frame; 1: as far from the toe as
+# it was there). The thigh keeps the knee near the hip, the foot the ankle near the toe.
+TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 # With the heel seen, the foot is tracked and the IK stage's segment carry does better (Qualisys walk,
 # knee+ankle hidden from 0.5 s: 33 / 11 mm, where the memory of 0.5 s gives 53 / 46): legs whose heel
 # is seen are left to it.
@@ -56,29 +58,29 @@ class PoseMemory:
 
     def __init__(self, present: Iterable[str]):
         present = set(present)
-        width = len(PELVIS_TARGETS + TOE_TARGETS)
-        legs, from_toe, kinds = [], [], []
+        width = len(TOE_SHARE)
+        legs, share, kinds = [], [], []
         for side in ("L", "R"):
-            targets = [t for t in PELVIS_TARGETS + TOE_TARGETS if f"{side}_{t}" in present]
+            targets = [t for t in TOE_SHARE if f"{side}_{t}" in present]
             if f"{side}_{KEY}" in present and targets:
                 row = [LANDMARK_INDEX[f"{side}_{KEY}"], LANDMARK_INDEX[f"{side}_{HEEL}"], len(targets)]
                 legs.append(row + [LANDMARK_INDEX[f"{side}_{t}"] for t in targets] + [-1] * (width - len(targets)))
-                from_toe.append([t in TOE_TARGETS for t in targets] + [False] * (width - len(targets)))
+                share.append([TOE_SHARE[t] for t in targets] + [0.0] * (width - len(targets)))
                 kinds.append(targets)
         n = len(legs)
-        # per leg: toe, heel, number of targets, the targets (-1 padding); whether each is kept from the toe
+        # per leg: toe, heel, number of targets, the targets (-1 padding); each target's toe share
         self.legs = np.array(legs, np.int64).reshape(n, 3 + width)
-        self.from_toe = np.array(from_toe, np.bool_).reshape(n, width)
+        self.toe_share = np.array(share, np.float64).reshape(n, width)
         # the other leg, when it has the same landmarks: each side learns the other's poses too, mirrored
         same = n == 2 and kinds[0] == kinds[1]
         self.mirror = np.array([1, 0] if same else [-1] * n, np.int64)
         # per leg, its own poses [0] and the other leg's, mirrored [1]:
         self.toes = np.full((n, 2, CAPACITY, 3), np.inf)      # remembered toe positions (pelvis frame)
-        self.offsets = np.zeros((n, 2, CAPACITY, width, 3))  # and the targets' offsets then
+        self.offsets = np.zeros((n, 2, CAPACITY, width, 3))  # and the targets then (pelvis frame)
         self.state = np.zeros((n, 2, 2), np.int64)           # poses kept, where the next one goes
         self.last_kept = np.full((n, 2, 3), np.inf)          # the toe of the last pose kept
-        self.last_seen = np.full((n, width, 3), np.nan)      # the offsets of the last frame seen whole
-        self.estimate = np.full((n, width, 3), np.nan)       # the smoothed offsets during a gap (NaN: none)
+        self.last_seen = np.full((n, width, 3), np.nan)      # the targets of the last frame seen whole
+        self.estimate = np.full((n, width, 3), np.nan)       # the smoothed targets during a gap (NaN: none)
         self._nothing_filled: np.ndarray | None = None
 
     def fill(self, landmarks: np.ndarray, filled: np.ndarray | None = None) -> np.ndarray:
@@ -90,7 +92,7 @@ class PoseMemory:
             filled = self._nothing_filled
         out = np.zeros(len(landmarks), np.bool_)
         if len(self.legs):
-            fill_frame(landmarks, filled, self.legs, self.mirror, self.from_toe, self.toes, self.offsets, self.state,
+            fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.toes, self.offsets, self.state,
                        self.last_kept, self.last_seen, self.estimate, out)
         return out
 
@@ -150,13 +152,14 @@ def _nearest(toes, count, toe, best_d, best_i):
 
 
 @njit(cache=True)
-def fill_frame(lm, filled, legs, mirror, from_toe, toes, offsets, state, last_kept, last_seen, estimate, out):
+def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_kept, last_seen, estimate, out):
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
         return
     best_d, best_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
     other_d, other_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
     flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
+    seen = np.empty((legs.shape[1] - 3, 3))
     for g in range(legs.shape[0]):
         key, heel, nt = legs[g, 0], legs[g, 1], legs[g, 2]
         toe = lm[key].copy()
@@ -172,13 +175,13 @@ def fill_frame(lm, filled, legs, mirror, from_toe, toes, offsets, state, last_ke
             estimate[g, 0, 0] = np.nan
             if not lost and measured:
                 for t in range(nt):
-                    anchor = toe if from_toe[g, t] else origin
-                    last_seen[g, t] = mtv(rot, lm[legs[g, 3 + t]] - anchor)
-                _keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, last_seen[g, :nt])
+                    seen[t] = mtv(rot, lm[legs[g, 3 + t]] - origin)
+                    last_seen[g, t] = seen[t] - toe_share[g, t] * local_toe
+                _keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, seen[:nt])
                 other = mirror[g]
                 if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
                     _keep(toes[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
-                          local_toe * flip, last_seen[g, :nt] * flip)
+                          local_toe * flip, seen[:nt] * flip)
             continue
         if state[g, 0, 0] < NEIGHBOURS:
             continue
@@ -188,12 +191,16 @@ def fill_frame(lm, filled, legs, mirror, from_toe, toes, offsets, state, last_ke
             _nearest(toes[g, 1], state[g, 1, 0], local_toe, other_d, other_i)
             if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
                 best_d[:], best_i[:], source = other_d, other_i, 1
-        mean, total = np.zeros((nt, 3)), 0.0
+        mean, mean_toe, total = np.zeros((nt, 3)), np.zeros(3), 0.0
         for n in range(NEIGHBOURS):
             w = 1.0 / (best_d[n] + 1e-3)
             mean += w * offsets[g, source, best_i[n], :nt]
+            mean_toe += w * toes[g, source, best_i[n]]
             total += w
         mean /= total
+        mean_toe /= total
+        for t in range(nt):  # smoothed: the poses' target less its share of their toe (this toe's is added after)
+            mean[t] -= toe_share[g, t] * mean_toe
         if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps
             if np.isnan(last_seen[g, 0, 0]):
                 estimate[g, :nt] = mean
@@ -203,6 +210,5 @@ def fill_frame(lm, filled, legs, mirror, from_toe, toes, offsets, state, last_ke
         for t in range(nt):
             k = legs[g, 3 + t]
             if not vfinite(lm[k]):
-                anchor = toe if from_toe[g, t] else origin
-                lm[k] = anchor + mv(rot, estimate[g, t])
+                lm[k] = origin + mv(rot, estimate[g, t] + toe_share[g, t] * local_toe)
                 out[k] = True
