@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from messages import MarkerFrame, decode, encode  # noqa: E402
 from mocap_cli.launch_file import LaunchFile  # noqa: E402
-from mocap_cli.bare_chain import bare_chain, codec_chain  # noqa: E402
+from mocap_cli.bare_chain import bare_chain, codec_chain, marker_frame  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
 
 
@@ -43,8 +43,7 @@ def runtime_chain(hops: int, frames: int, rate: float) -> np.ndarray:
 
 
 def codec_cost(n: int = 20000) -> float:
-    msg = MarkerFrame(header=MarkerFrame.make_header(1, 0.0, 1), labels=[f"M{i:02d}" for i in range(35)],
-                      positions=np.random.rand(35, 3).astype(np.float32), flags=np.zeros(35, np.uint8))
+    msg = marker_frame()
     for _ in range(1000):
         decode(encode(msg), "t", MarkerFrame)
     runs = []

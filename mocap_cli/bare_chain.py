@@ -17,7 +17,8 @@ import zmq
 END = b"END"
 
 
-def _marker_frame():
+def marker_frame():
+    """A 35-marker frame of random positions (the benchmarks' message)."""
     from messages import MarkerFrame
 
     return MarkerFrame(header=MarkerFrame.make_header(), labels=[f"M{i:02d}" for i in range(35)],
@@ -28,7 +29,7 @@ def _source(endpoint, frames, rate, ready, codec):
     if codec:
         from messages import encode
 
-        msg = _marker_frame()
+        msg = marker_frame()
     ctx = zmq.Context()
     s = ctx.socket(zmq.XPUB)
     s.bind(endpoint)

@@ -141,9 +141,8 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     from the profile's tracking markers (``tracking``, frames x markers x 3; ``tracking_of``: the
     segment of each, LandmarkMap.tracking_of), which stay seen. ``pose_memory``: lost knee and ankle
     landmarks from the take's earlier poses (mocap_core.pose_memory), after the rebuild."""
+    from mocap_core.landmark_fills import LandmarkFills
     from mocap_core.localization import Localizer
-    from mocap_core.pose_memory import PoseMemory
-    from mocap_core.segment_rebuild import SegmentRebuilder
 
     hidden = joints
     joints = [k for j in joints if j not in LANDMARK_INDEX for k in SEGMENT_OF.get(j, (j,))]
@@ -154,11 +153,9 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             for name in landmarks_of(j):
                 lm[start:stop, LANDMARK_INDEX[name]] = np.nan
     lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
-    lm, rebuilt = SegmentRebuilder(tracking_of).fill_landmarks(lm, tracking) if rebuild else (lm, None)
-    if pose_memory:  # the profile's landmarks: those the complete take has somewhere
-        present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
-        lm, remembered = PoseMemory(present).fill_landmarks(lm, rebuilt)
-        rebuilt = remembered if rebuilt is None else rebuilt | remembered
+    # the profile's landmarks: those the complete take has somewhere
+    present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
+    lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present).fill_landmarks(lm, tracking)
     loc = Localizer(profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if mode == "joint":

@@ -16,10 +16,9 @@ from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
+from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.localization import Localizer
 from mocap_core.profiles import Profile
-from mocap_core.pose_memory import PoseMemory
-from mocap_core.segment_rebuild import SegmentRebuilder
 
 
 @dataclass
@@ -43,8 +42,8 @@ class SkeletonPipeline:
         from the pose memory, swivel, segment carry, re-acquisition blend)."""
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
-        self.rebuilder = SegmentRebuilder(self.landmark_map.tracking_of) if beyond and fill_gaps else None
-        self.memory = PoseMemory(self.landmark_map.present()) if beyond and fill_gaps else None
+        on = beyond and fill_gaps  # the landmark fills are gap fills
+        self.fills = LandmarkFills(on, on, self.landmark_map.tracking_of, self.landmark_map.present())
         self.localizer = Localizer(profile.body)
         options = BEYOND_THESIS if beyond else {}
         self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
@@ -59,14 +58,7 @@ class SkeletonPipeline:
                         ) -> SolvedChunk:
         """``tracking``: the profile's tracking markers of the same frames (landmark_map.tracking), which
         help rebuild lost limb landmarks (the rebuild is a gap fill: on with ``beyond`` and ``fill_gaps``)."""
-        rebuilt = None
-        if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
-            if tracking is None:
-                tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
-            landmarks, rebuilt = self.rebuilder.fill_landmarks(landmarks, tracking)
-        if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
-            landmarks, recalled = self.memory.fill_landmarks(landmarks, rebuilt)
-            rebuilt = recalled if rebuilt is None else rebuilt | recalled
+        landmarks, rebuilt = self.fills.fill_landmarks(landmarks, tracking)
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:

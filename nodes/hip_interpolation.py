@@ -14,9 +14,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
-from mocap_core.pose_memory import POSE_MEMORY_HELP, PoseMemory
+from mocap_core.landmark_fills import LandmarkFills
+from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.profiles import LANDMARKS, load_profile
-from mocap_core.segment_rebuild import REBUILD_HELP, SegmentRebuilder
+from mocap_core.segment_rebuild import REBUILD_HELP
 from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 
@@ -39,8 +40,7 @@ class HipInterpolation(Node):
     def setup(self) -> None:
         self.profile = load_profile(self.params.profile)
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
-        self.rebuilder = None  # made when the profile is resolved: it needs the tracking markers' layout
-        self.memory = None     # likewise: it needs the landmarks the profile has
+        self.fills = None  # made when the profile is resolved: they need its tracking markers and landmarks
         if self.params.rebuild:
             warm_up(("rebuild",))  # its kernel loaded before ready, not on the first frame (0.65 s)
         if self.params.pose_memory:
@@ -52,23 +52,17 @@ class HipInterpolation(Node):
         if msg.labels != self.labels:  # first frame, or the marker set changed: resolve again
             self.map = self.profile.resolve(msg.labels)  # a ProfileError is counted and logged by the runtime
             self.labels = msg.labels
-            if self.params.rebuild:
-                self.rebuilder = SegmentRebuilder(self.map.tracking_of)
-                if self.map.absent_tracking:
-                    self.log.warning("tracking markers %s of profile %s are not in the stream: rebuilt "
-                                     "without them", ", ".join(self.map.absent_tracking), self.profile.name)
-            if self.params.pose_memory:  # the poses remembered were of the old marker set's landmarks
-                self.memory = PoseMemory(self.map.present())
+            # (new ones: what they learned was of the old marker set's landmarks)
+            self.fills = LandmarkFills(self.params.rebuild, self.params.pose_memory, self.map.tracking_of,
+                                       self.map.present())
+            if self.params.rebuild and self.map.absent_tracking:
+                self.log.warning("tracking markers %s of profile %s are not in the stream: rebuilt "
+                                 "without them", ", ".join(self.map.absent_tracking), self.profile.name)
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
         lm = self.map.apply(msg.positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
-        rebuilt = None
-        if self.rebuilder is not None:
-            rebuilt = self.rebuilder.fill(lm, self.map.tracking(msg.positions))
-        if self.memory is not None:
-            recalled = self.memory.fill(lm, rebuilt)
-            rebuilt = recalled if rebuilt is None else rebuilt | recalled
+        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if self.params.rebuild else None)
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

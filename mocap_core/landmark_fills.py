@@ -1,0 +1,46 @@
+"""The landmark-level gap fills, in their order: the segment rebuild, then the pose memory.
+
+One place for how the two go together, used by the hip node, the offline pipeline and `mocap eval
+gaps`: the memory fills only what the rebuild could not, and never learns from what it rebuilt.
+"""
+from __future__ import annotations
+
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from mocap_core.pose_memory import PoseMemory
+from mocap_core.segment_rebuild import SegmentRebuilder
+
+
+class LandmarkFills:
+    """``tracking_of``: the segment of each tracking marker (LandmarkMap.tracking_of); ``present``: the
+    landmark names the profile has (LandmarkMap.present()). Keep one per actor: both fills keep state."""
+
+    def __init__(self, rebuild: bool, pose_memory: bool, tracking_of: Sequence[str] = (),
+                 present: Iterable[str] = ()):
+        self.rebuilder = SegmentRebuilder(tracking_of) if rebuild else None
+        self.memory = PoseMemory(present) if pose_memory else None
+
+    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray | None:
+        """One frame, in place; the mask of the landmarks filled, or None when no fill is on."""
+        filled = None
+        if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
+            filled = self.rebuilder.fill(landmarks, tracking)
+        if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
+            recalled = self.memory.fill(landmarks, filled)
+            filled = recalled if filled is None else filled | recalled
+        return filled
+
+    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Frames (F, n_landmarks, 3) -> the filled copy and the (F, n_landmarks) mask (None: no fill on)."""
+        filled = None
+        if self.rebuilder is not None:
+            if tracking is None and self.rebuilder.n_tracking:  # none given: the tracking markers are lost
+                tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
+            landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking)
+        if self.memory is not None:
+            landmarks, recalled = self.memory.fill_landmarks(landmarks, filled)
+            filled = recalled if filled is None else filled | recalled
+        return landmarks, filled
