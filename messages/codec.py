@@ -10,8 +10,8 @@ from __future__ import annotations
 import msgpack
 from pydantic import ValidationError
 
-from messages.fastpath import fast_decode, fast_encode, peek_header
-from messages.schemas import BY_SCHEMA, Message
+from messages.fastpath import HeaderWire, fast_decode, fast_encode, fast_header, peek_header
+from messages.schemas import BY_SCHEMA, Header, Message
 
 MAX_MESSAGE_BYTES = 16 * 1024 * 1024  # also set as ZMQ_MAXMSGSIZE on every socket
 
@@ -46,6 +46,20 @@ def decode(payload: bytes, topic: str = "?", expected: type[Message] | None = No
     return _checked_decode(payload, topic, expected)
 
 
+def decode_header(payload: bytes, topic: str = "?", expected: type[Message] | None = None) -> HeaderWire:
+    """Check only a message's header (schema, version, the header's own fields), for a node that
+    forwards or stores bytes without reading them; the arrays are checked by whoever decodes it.
+    Raises the same :class:`DecodeError` as :func:`decode` for what it checks."""
+    if len(payload) > MAX_MESSAGE_BYTES:
+        raise DecodeError(topic, f"{len(payload)} bytes exceeds the {MAX_MESSAGE_BYTES}-byte limit", "oversized")
+    h = fast_header(payload)
+    cls = BY_SCHEMA.get(h.schema) if h is not None else None
+    if cls is not None and cls.VERSION == h.version and (expected is None or expected is Message or cls is expected):
+        return h
+    header = _checked_header(payload, topic, expected)[2]  # raises, unless pydantic takes what msgspec did not
+    return HeaderWire(**header.model_dump(by_alias=True))
+
+
 def _by_schema(payload: bytes) -> type[Message] | None:
     schema = peek_header(payload).get("schema")
     return BY_SCHEMA.get(schema) if type(schema) is str else None
@@ -53,6 +67,17 @@ def _by_schema(payload: bytes) -> type[Message] | None:
 
 def _checked_decode(payload: bytes, topic: str, expected: type[Message] | None) -> Message:
     """The authoritative path: every check in order, pydantic validation, a precise error."""
+    cls, data, _ = _checked_header(payload, topic, expected)
+    try:
+        return cls.model_validate(data)
+    except ValidationError as e:
+        first = e.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or cls.SCHEMA
+        raise DecodeError(topic, f"{cls.SCHEMA}.{where}: {first['msg']}", "invalid") from None
+
+
+def _checked_header(payload: bytes, topic: str, expected: type[Message] | None) -> tuple[type[Message], dict, Header]:
+    """(model class, msgpack map, header) of a message whose header is right; else the precise DecodeError."""
     try:
         data = msgpack.unpackb(payload, raw=False, strict_map_key=True)
     except Exception as e:  # msgpack raises several unrelated types on garbage
@@ -69,11 +94,12 @@ def _checked_decode(payload: bytes, topic: str, expected: type[Message] | None) 
     if version != cls.VERSION:
         raise DecodeError(topic, f"{schema} version {version!r}, this build reads {cls.VERSION}", "version")
     try:
-        return cls.model_validate(data)
+        header = Header.model_validate(data["header"])
     except ValidationError as e:
         first = e.errors()[0]
-        where = ".".join(str(p) for p in first["loc"]) or schema
-        raise DecodeError(topic, f"{schema}.{where}: {first['msg']}", "invalid") from None
+        where = ".".join(str(p) for p in first["loc"])
+        raise DecodeError(topic, f"{schema}.header.{where}: {first['msg']}", "invalid") from None
+    return cls, data, header
 
 
 def json_schemas() -> dict[str, dict]:

@@ -154,6 +154,33 @@ class _Peek(msgspec.Struct):  # only the header; every other key is skipped in C
 _peek = msgspec.msgpack.Decoder(_Peek)
 
 
+class HeaderWire(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """messages.Header as it travels (wire names), checked in C: what a header-only reader gets."""
+    schema: str
+    version: int
+    publisher: str = ""
+    seq: int = 0
+    frame: int = 0
+    capture_time_s: float = 0.0
+    entry_time_ns: int = 0
+
+
+class _HeaderOnly(msgspec.Struct):
+    header: HeaderWire
+
+
+_header_only = msgspec.msgpack.Decoder(_HeaderOnly)
+
+
+def fast_header(payload: bytes) -> HeaderWire | None:
+    """The checked header of an encoded message (the rest is skipped, not checked), or None when
+    it has no valid one."""
+    try:
+        return _header_only.decode(payload).header
+    except Exception:  # garbage of any kind: the checked path says what is wrong
+        return None
+
+
 def peek_header(payload: bytes) -> dict:
     """The header map of an encoded message, or {} when it has none."""
     try:

@@ -9,6 +9,7 @@ from nodes.runtime import Node
 KINDS: dict[str, str] = {
     "synthetic_source": "nodes.synthetic_source:SyntheticSource",
     "relay": "nodes.relay:Relay",
+    "raw_relay": "nodes.relay:RawRelay",
     "frame_log": "nodes.frame_log:FrameLog",
     "file_source": "nodes.file_source:FileSource",
     "qtm_ingest": "nodes.qtm_ingest:QtmIngest",

@@ -35,9 +35,9 @@ import numpy as np
 import zmq
 from pydantic import BaseModel, ConfigDict
 
-from messages import ALL_MESSAGES, DecodeError, Heartbeat, Latency, Message, decode, encode
-from messages.codec import MAX_MESSAGE_BYTES
-from messages.fastpath import array_fields, prepare
+from messages import ALL_MESSAGES, DecodeError, Header, Heartbeat, Latency, Message, decode, encode
+from messages.codec import MAX_MESSAGE_BYTES, decode_header
+from messages.fastpath import HeaderWire, array_fields, prepare
 from nodes.spec import NodeSpec
 
 HEARTBEAT_PERIOD_S = 1.0
@@ -63,6 +63,10 @@ class Node:
     is_source: ClassVar[bool] = False                     # sources wait for the launcher's "start"
     timer_period_s: ClassVar[float | None] = None         # call on_timer() this often (e.g. join timeouts)
     drain_on_stop: ClassVar[bool] = False                 # handle frames already queued when stopped
+    # Forward bytes without reading them (a relay): the runtime checks only each message's header
+    # (schema, version, sequence, as ROS 2's topic_tools relay reads none of its messages) and calls
+    # on_raw with msg=None; whoever reads the message downstream checks the rest.
+    header_only: ClassVar[bool] = False
 
     @classmethod
     def inputs(cls, params: BaseModel) -> dict[str, type[Message]]:
@@ -85,8 +89,9 @@ class Node:
     def on_message(self, topic: str, msg: Message) -> None:
         """Handle one decoded message of a logical topic."""
 
-    def on_raw(self, wire_topic: str, payload: bytes, msg: Message) -> None:
-        """Handle one message with its exact wire bytes (default: call on_message)."""
+    def on_raw(self, wire_topic: str, payload: bytes, msg: Message | None) -> None:
+        """Handle one message with its exact wire bytes (default: call on_message). ``msg`` is the
+        decoded message, or None for a ``header_only`` node given bytes from a socket."""
         self.on_message(self.ctx._logical[wire_topic], msg)
 
     def tick(self) -> float | None:
@@ -136,6 +141,7 @@ class NodeContext:
         self._own_zctx = zctx is None
         self.zctx = zctx or zmq.Context()
         self.publisher_id = spec.id
+        self.header_only = node_cls.header_only
         self._seq: dict[str, int] = collections.defaultdict(int)
         self._pub_stats: dict[str, _TopicStats] = collections.defaultdict(_TopicStats)
         self._sub_stats: dict[str, _TopicStats] = collections.defaultdict(_TopicStats)
@@ -326,19 +332,23 @@ class NodeContext:
         if logical is None:
             return None  # a longer topic that shares our prefix; not ours
         try:
-            msg = decode(frames[1], wire, self.subscribes[logical])
+            if self.header_only:
+                msg, header = None, decode_header(frames[1], wire, self.subscribes[logical])
+            else:
+                msg = decode(frames[1], wire, self.subscribes[logical])
+                header = msg.header
         except DecodeError as e:
             self._error(f"decode_{e.kind}", str(e))
             return None
-        return (logical, msg) if self.account(wire, msg) else None
+        return (logical, msg) if self.account(wire, header) else None
 
-    def account(self, wire: str, msg: Message) -> bool:
-        """Count a received message (sequence gaps, restarts, latency); False for a sibling replica's."""
-        if self.spec.replicas > 1 and msg.header.frame % self.spec.replicas != self.spec.replica:
+    def account(self, wire: str, h: Header | HeaderWire) -> bool:
+        """Count a received message by its header (sequence gaps, restarts, latency); False for a
+        sibling replica's."""
+        if self.spec.replicas > 1 and h.frame % self.spec.replicas != self.spec.replica:
             return False  # a sibling replica's frame
         st = self._sub_stats[wire]
         st.count += 1
-        h = msg.header
         last = st.last_seq.get(h.publisher)
         if last is not None and h.seq > last + 1:
             st.drops += h.seq - last - 1
@@ -428,6 +438,8 @@ class NodeLoop:
         self.started = self.control is None  # without a launcher, run at once
         self.finished = False
         self.wants_bytes = node_cls.on_raw is not Node.on_raw  # a recorder (hand-offs get encoded for it)
+        if node_cls.header_only and not self.wants_bytes:
+            raise TypeError(f"{node_cls.__name__} is header_only, so it must handle bytes in on_raw")
 
     def settled(self) -> bool:
         """Started and reported ready: from now on its side sockets need only an occasional look."""
@@ -505,7 +517,7 @@ class NodeLoop:
         newest: dict[str, Message] = {}
         while inbox:
             wire, msg = inbox.popleft()
-            if not ctx.account(wire, msg):
+            if not ctx.account(wire, msg.header):
                 continue
             if self.spec.keep_last:
                 if wire in newest:
@@ -656,7 +668,7 @@ def _handle(ctx: NodeContext, node: Node, frames: list[bytes], wants_bytes: bool
         _deliver(ctx, node, got[0], frames[0].decode(), got[1], frames[1], wants_bytes)
 
 
-def _deliver(ctx: NodeContext, node: Node, logical: str, wire: str, msg: Message, payload: bytes | None,
+def _deliver(ctx: NodeContext, node: Node, logical: str, wire: str, msg: Message | None, payload: bytes | None,
              wants_bytes: bool) -> None:
     """Call the node's handler (with the wire bytes, encoding a handed-over message, if it wants them)."""
     try:

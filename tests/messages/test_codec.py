@@ -8,7 +8,7 @@ from hypothesis.extra import numpy as hnp
 
 from messages import (ALL_MESSAGES, DecodeError, Heartbeat, LimbSolution, MarkerFrame, MarkerSet, RigPose,
                       SkeletonFrame, decode, encode, json_schemas)
-from messages.codec import MAX_MESSAGE_BYTES
+from messages.codec import MAX_MESSAGE_BYTES, decode_header
 from mocap_core.skeleton import N_JOINTS
 
 
@@ -155,6 +155,59 @@ def test_rejects_oversized():
     with pytest.raises(DecodeError) as e:
         decode(b"\x00" * (MAX_MESSAGE_BYTES + 1), "t")
     assert e.value.kind == "oversized"
+
+
+# -- header-only reading (raw_relay) ------------------------------------------------------------------
+@pytest.mark.parametrize("msg", samples(), ids=lambda m: m.SCHEMA)
+def test_header_only_reads_the_header_of_every_message(msg):
+    h = decode_header(encode(msg), "t", type(msg))
+    assert (h.schema, h.version, h.seq, h.frame, h.entry_time_ns) == (
+        msg.SCHEMA, msg.VERSION, msg.header.seq, msg.header.frame, msg.header.entry_time_ns)
+
+
+def test_header_only_rejects_what_decode_rejects_in_the_header():
+    raw = _raw(marker_frame())
+    raw["header"]["version"] = 99
+    cases = [(b"\xc1garbage", "garbage"), (msgpack.packb([1, 2]), "foreign"), (msgpack.packb(raw), "version"),
+             (encode(samples()[0]), "wrong_schema"), (encode(marker_frame())[:-5], "garbage")]
+    bad_seq = _raw(marker_frame())
+    bad_seq["header"]["seq"] = "x"
+    cases.append((msgpack.packb(bad_seq), "invalid"))
+    for payload, kind in cases:
+        with pytest.raises(DecodeError) as e:
+            decode_header(payload, "markers/raw", MarkerFrame)
+        assert e.value.kind == kind and e.value.topic == "markers/raw", (payload[:20], e.value)
+    with pytest.raises(DecodeError, match="header.seq"):
+        decode_header(msgpack.packb(bad_seq), "t", MarkerFrame)
+
+
+def test_header_only_leaves_the_arrays_to_whoever_reads_them():
+    raw = _raw(marker_frame(4))
+    raw["positions"]["shape"] = [3, 4]
+    payload = msgpack.packb(raw)
+    assert decode_header(payload, "t", MarkerFrame).frame == 7
+    with pytest.raises(DecodeError, match="positions"):
+        decode(payload, "t", MarkerFrame)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.data())
+def test_header_only_accepts_every_message_decode_accepts(data):
+    payload = bytearray(encode(marker_frame(5)))
+    for _ in range(data.draw(st.integers(1, 4))):
+        payload[data.draw(st.integers(0, len(payload) - 1))] = data.draw(st.integers(0, 255))
+    payload = bytes(payload)
+    try:
+        msg = decode(payload, "t", MarkerFrame)
+    except DecodeError:
+        try:
+            decode_header(payload, "t", MarkerFrame)
+        except DecodeError:
+            pass
+        return
+    h = decode_header(payload, "t", MarkerFrame)
+    assert (h.publisher, h.seq, h.frame, h.entry_time_ns) == (
+        msg.header.publisher, msg.header.seq, msg.header.frame, msg.header.entry_time_ns)
 
 
 def test_json_schema_for_every_message():

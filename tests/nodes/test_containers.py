@@ -25,11 +25,11 @@ nodes:
     kind: synthetic_source
     params: {{rate_hz: {rate}, frames: {frames}}}
   - id: a
-    kind: relay
+    kind: {relay}
     container: relays
     remaps: {{in: markers/raw, out: markers/a}}
   - id: b
-    kind: relay
+    kind: {relay}
     container: relays
     remaps: {{in: markers/a, out: markers/b}}
   - id: log
@@ -47,9 +47,9 @@ def read_frames(path):
     return [int(r["frame"]) for r in log_rows(path)]
 
 
-def chain_file(tmp_path, **kw):
+def chain_file(tmp_path, relay="relay", **kw):
     f = tmp_path / "g.yaml"
-    f.write_text(CHAIN.format(log=tmp_path / "log.csv", tap=tmp_path / "tap.csv", **kw))
+    f.write_text(CHAIN.format(log=tmp_path / "log.csv", tap=tmp_path / "tap.csv", relay=relay, **kw))
     return f
 
 
@@ -88,8 +88,9 @@ def test_containers_and_curve_are_refused_together(tmp_path):
         load_launch_file(f)
 
 
-def test_a_container_delivers_every_frame_inside_and_out(tmp_path):
-    f = chain_file(tmp_path, rate=500, frames=300)
+@pytest.mark.parametrize("relay", ["relay", "raw_relay"])
+def test_a_container_delivers_every_frame_inside_and_out(tmp_path, relay):
+    f = chain_file(tmp_path, relay=relay, rate=500, frames=300)
     with launched(tmp_path, f.read_text(), "--until-done") as g:
         g.proc.wait(timeout=40)
         assert g.proc.returncode == 0, g.log()

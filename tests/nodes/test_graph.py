@@ -2,6 +2,8 @@
 import os
 import signal
 
+import pytest
+
 from tests.conftest import launched, log_rows, pid_alive, wait_for
 
 SMOKE = """
@@ -57,7 +59,8 @@ def test_ctrl_c_stops_everything_within_two_seconds(tmp_path):
         assert not g.registry_file.exists()
 
 
-def test_malformed_messages_are_counted_and_skipped(tmp_path):
+@pytest.mark.parametrize("relay_kind", ["relay", "raw_relay"])
+def test_malformed_messages_are_counted_and_skipped(tmp_path, relay_kind):
     out = tmp_path / "frames.csv"
     graph = f"""
 nodes:
@@ -65,7 +68,7 @@ nodes:
     kind: tests.fixtures_nodes.garbage_source:GarbageSource
     params: {{frames: 80}}
   - id: relay
-    kind: relay
+    kind: {relay_kind}
     remaps: {{in: markers/raw, out: markers/relayed}}
   - id: log
     kind: frame_log
@@ -80,6 +83,9 @@ nodes:
         assert int(relay.split()[-1]) >= 60, relay  # errors column: every bad message counted
         assert g.proc.poll() is None and pid_alive(g.node_pids()["relay"])
     assert read_frames(out) == list(range(80))
+    # A relay publishes frames as its own; a raw relay forwards the source's bytes, stamp included.
+    publisher = "relay" if relay_kind == "relay" else "bad"
+    assert {r["publisher"] for r in log_rows(out)} == {publisher}
     log = g.log()
     assert "not msgpack" in log and "no header map" in log and "on a topic of mocap.MarkerFrame" in log
     assert "topic 'markers/raw'" in log
