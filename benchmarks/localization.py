@@ -18,6 +18,7 @@ from mocap_core.pose_memory import CAPACITY, PoseMemory  # noqa: E402
 from mocap_core.profiles import LANDMARK_INDEX  # noqa: E402
 from mocap_core.profiles import load_profile  # noqa: E402
 from mocap_core.recordings import read_recording  # noqa: E402
+from mocap_core.segment_rebuild import SegmentRebuilder  # noqa: E402
 from mocap_core.warmup import warm_up  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -51,6 +52,22 @@ def main():
         batch = per_call_us(lambda i: loc.localize(lm), 1) / n
         print(f"  localization, batch of {n}  {batch:7.1f}")
     pose_memory_cost()
+    rebuild_cost()
+
+
+def rebuild_cost():
+    """The segment rebuild on the sprint (59 markers): nothing lost, one elbow rebuilt and refined."""
+    rec = read_recording(DATA / "03_sprint_start_BTK_SprintMotion.trc")
+    lmap = load_profile("btk_sprint").resolve(rec.labels)
+    lm, tracking = lmap.apply(rec.positions[:600]).astype(np.float64), lmap.tracking(rec.positions[:600])
+    rebuilder = SegmentRebuilder(lmap.tracking_of)
+    for f in range(300):  # learn the references and distances
+        rebuilder.fill(lm[f].copy(), tracking[f])
+    lost = lm.copy()
+    lost[:, [LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]]] = np.nan
+    seen = per_call_us(lambda i: rebuilder.fill(lm[300 + i].copy(), tracking[300 + i]), 300)
+    elbow = per_call_us(lambda i: rebuilder.fill(lost[300 + i].copy(), tracking[300 + i]), 300)
+    print(f"segment rebuild (sprint), us per frame: nothing lost {seen:.1f}, one elbow rebuilt {elbow:.1f}")
 
 
 def pose_memory_cost():

@@ -232,5 +232,8 @@ def _keep_distances(p, lm, seg, rigid, width, seen, distance, prior, tracking_on
             j = v / n
             a += np.outer(j, j)
             g += j * (n - distance[m])
-        q = q - np.linalg.solve(a, g)
+        step = np.linalg.solve(a, g)
+        q = q - step
+        if (step ** 2).sum() < 1e-14:  # converged (0.1 um)
+            break
     return q
