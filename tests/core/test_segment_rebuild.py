@@ -102,6 +102,29 @@ def test_epicondyles_keep_their_learned_distances_to_the_upper_arm():
     assert rigid_off == pytest.approx(0.008) and off < 0.9 * rigid_off, (off, rigid_off)
 
 
+def test_the_tracking_markers_distances_hold_when_the_styloids_slide():
+    """The styloids' skin slides 12 mm against the forearm; the forearm's wand and the upper arm's marker
+    stay where the bones have them. The second pass keeps the rebuilt epicondyle at its learned
+    distances to those two (the first pass alone leaves one 3.2 mm off)."""
+    rng = np.random.default_rng(9)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    tracks = rng.normal(scale=0.1, size=(2, 3))
+    hle, hme, rsp, usp = (LANDMARK_INDEX[n] for n in ("L_HLE", "L_HME", "L_RSP", "L_USP"))
+    rebuilder = SegmentRebuilder(("L_forearm", "L_upper_arm"))
+    rebuilder.fill(first.copy(), tracks.copy())
+    rot, shift = rotation([0.3, 1, -0.2], 0.7), np.array([0.2, -0.1, 0.3])
+    moved, moved_tracks = first @ rot.T + shift, tracks @ rot.T + shift
+    lost = moved.copy()
+    lost[[hle, hme]] = np.nan
+    lost[rsp] += [0.012, 0, 0]
+    lost[usp] += [0, -0.01, 0.005]
+    assert rebuilder.fill(lost, moved_tracks.copy())[hle]
+    for k in range(2):
+        learned = np.linalg.norm(first[hle] - tracks[k])
+        assert abs(np.linalg.norm(lost[hle] - moved_tracks[k]) - learned) < 0.0015, k
+    assert np.linalg.norm(lost[hle] - moved[hle]) < 0.008
+
+
 def test_partners_on_one_line_rebuild_nothing():
     """Heel and malleoli lost: the toe landmark is the midpoint of the two metatarsal tracking markers,
     so the three partners lie on one line and the foot's rotation about it is unknown."""
