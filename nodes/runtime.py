@@ -9,6 +9,8 @@ writes (``publishes``), and handlers. The runtime owns the sockets and the loop:
 - one SUB socket connected to every publisher of every topic it reads; frames are multipart
   ``[topic, msgpack payload]``;
 - a malformed or foreign message is counted, logged with topic and reason, and skipped;
+- a ``header_only`` node (a relay) is handed the bytes of each message whose header alone was
+  checked, and the first node downstream that decodes it checks the rest;
 - a 1 Hz :class:`~messages.Heartbeat` on ``diagnostics`` with rates, latency percentiles
   (from the header's entry time), drops (sequence gaps per publisher) and error counts;
 - in a container (several nodes in one process), a message for a neighbour is handed over as the
@@ -421,6 +423,8 @@ class NodeLoop:
     one loop, wired over ``inproc://`` sockets, which saves most of ZeroMQ's cross-process wake-ups."""
 
     def __init__(self, spec: NodeSpec, node_cls: type[Node], zctx: zmq.Context | None = None):
+        if node_cls.header_only and node_cls.on_raw is Node.on_raw:
+            raise TypeError(f"{node_cls.__name__} is header_only, so it must handle bytes in on_raw")
         self.spec, self.node_cls = spec, node_cls
         params = node_cls.Params.model_validate(spec.params)
         self.ctx = ctx = NodeContext(spec, node_cls, zctx, params)
@@ -438,8 +442,6 @@ class NodeLoop:
         self.started = self.control is None  # without a launcher, run at once
         self.finished = False
         self.wants_bytes = node_cls.on_raw is not Node.on_raw  # a recorder (hand-offs get encoded for it)
-        if node_cls.header_only and not self.wants_bytes:
-            raise TypeError(f"{node_cls.__name__} is header_only, so it must handle bytes in on_raw")
 
     def settled(self) -> bool:
         """Started and reported ready: from now on its side sockets need only an occasional look."""

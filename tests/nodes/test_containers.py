@@ -208,3 +208,13 @@ def test_hand_over_gives_neighbours_the_object_read_only_and_a_relay_stamps_a_co
         for loop in loops:
             loop.ctx.close()
         zctx.term()
+
+
+def test_a_header_only_node_must_take_bytes():
+    class Blind(Node):
+        kind = "blind"
+        subscribes = {"in": MarkerFrame}
+        header_only = True
+
+    with pytest.raises(TypeError, match="Blind is header_only, so it must handle bytes in on_raw"):
+        NodeLoop(NodeSpec(id="b", kind="blind", remaps={"in": "m/a"}), Blind, zmq.Context.instance())
