@@ -155,20 +155,27 @@ def test_knee_and_ankle_lost_together_beyond_the_thesis(walk):
 
 
 def test_swivel_angle_from_the_next_joints_frame_known_answer():
-    """The point on the swivel circle where the bone to the target has a given component along an axis of
-    the target joint's frame: the answer satisfies it, and of the two it is the one nearer the prior."""
-    from mocap_core.analytic_fill import on_circle_towards as _on_circle_towards
+    """The point on the swivel circle where the bone to the target, seen in the target joint's frame, is
+    its usual direction: found from a prior 17 degrees off, on either side; with no weights the prior
+    stays."""
+    from mocap_core.analytic_fill import on_circle_fitting
 
-    axis, centre_to_target, radius, lower = np.array([0, 0, -1.0]), np.array([0, 0, -0.2]), 0.1, np.hypot(0.1, 0.2)
-    n = np.array([1.0, 0, 0])
-    for truth in np.radians([20, 75, 140, -60]):
+    axis, centre_to_target, radius = np.array([0, 0, -1.0]), np.array([0, 0, -0.2]), 0.1
+    c, s_ = np.cos(0.4), np.sin(0.4)
+    ref = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1.0]])  # the target joint's frame, turned about z
+    weight = np.full(3, 400.0)
+    for truth in np.radians([20, 75, 140, -60, 179]):
         elbow = radius * np.array([np.cos(truth), np.sin(truth), 0])
-        c = n @ (centre_to_target - elbow) / lower
-        prior = np.array([np.cos(truth + 0.3), np.sin(truth + 0.3), 0])  # 17 degrees off
-        u = _on_circle_towards(prior, axis, radius, centre_to_target, lower, n, c)
-        assert abs(np.linalg.norm(u) - 1) < 1e-9 and abs(u @ axis) < 1e-9
-        assert abs(n @ (centre_to_target - radius * u) / lower - c) < 1e-9
-        np.testing.assert_allclose(u, elbow / radius, atol=1e-9)
+        bone = centre_to_target - elbow
+        usual = ref.T @ (bone / np.linalg.norm(bone))
+        for off in (0.3, -0.3):
+            prior = np.array([np.cos(truth + off), np.sin(truth + off), 0])
+            u = on_circle_fitting(prior, axis, radius, centre_to_target, ref, usual, weight)
+            assert abs(np.linalg.norm(u) - 1) < 1e-9 and abs(u @ axis) < 1e-9
+            np.testing.assert_allclose(u, elbow / radius, atol=0.01)  # within 0.6 degrees: turning costs a little
+    prior = np.array([1.0, 0, 0])
+    np.testing.assert_allclose(on_circle_fitting(prior, axis, radius, centre_to_target, ref, usual, np.zeros(3)),
+                               prior)
 
 
 def test_lost_hand_moves_with_the_forearm(walk):

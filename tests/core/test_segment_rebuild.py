@@ -205,7 +205,7 @@ def test_walk_elbow_rebuilt_with_the_forearm_wand():
     """The Qualisys set has no olecranon marker: the forearm's wand is the third partner."""
     runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["elbow_l"], 0.3)
     assert runs[True].stats()["mean"] < 0.01 and runs[True].stats()["max"] < 0.02, runs[True].stats()
-    assert runs[False].stats()["mean"] > 0.015  # the swivel alone: 18 mm
+    assert runs[False].stats()["mean"] > 1.5 * runs[True].stats()["mean"]  # the swivel alone: 7 mm
 
 
 def test_karate_elbow_rebuilt_from_the_forearm_and_upper_arm_markers():
