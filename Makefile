@@ -87,3 +87,8 @@ results-beyond: $(STAMP)
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:walk1 \
 		--profile dance28 --remove knee_l,ankle_l --from 2 --constraints on --mode markers \
 		--swivel --segment-carry --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_walk1_memory
+	for take in dance1 dance2 walk1 walk2; do for side in l r; do \
+		$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:$$take \
+			--profile dance28 --remove elbow_$$side --from 1 --solvers ccd --constraints on --mode markers \
+			--swivel --segment-carry --reacquire-step 0.01 --report docs/results/elbow_swivel_$${take}_$$side \
+			|| exit 1; done; done
