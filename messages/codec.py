@@ -10,10 +10,11 @@ from __future__ import annotations
 import msgpack
 from pydantic import ValidationError
 
-from messages.fastpath import HeaderWire, fast_decode, fast_encode, fast_header, peek_header
+from messages.fastpath import fast_decode, fast_encode, header_decoder, peek_header
 from messages.schemas import BY_SCHEMA, Header, Message
 
 MAX_MESSAGE_BYTES = 16 * 1024 * 1024  # also set as ZMQ_MAXMSGSIZE on every socket
+_fast_header = header_decoder(Header)
 
 
 class DecodeError(Exception):
@@ -36,8 +37,7 @@ def peek_schema(payload: bytes) -> tuple[str, int] | None:
 
 
 def decode(payload: bytes, topic: str = "?", expected: type[Message] | None = None) -> Message:
-    if len(payload) > MAX_MESSAGE_BYTES:
-        raise DecodeError(topic, f"{len(payload)} bytes exceeds the {MAX_MESSAGE_BYTES}-byte limit", "oversized")
+    _check_size(payload, topic)
     cls = expected if expected is not None and expected is not Message else _by_schema(payload)
     if cls is not None:
         msg = fast_decode(cls, payload)
@@ -46,18 +46,21 @@ def decode(payload: bytes, topic: str = "?", expected: type[Message] | None = No
     return _checked_decode(payload, topic, expected)
 
 
-def decode_header(payload: bytes, topic: str = "?", expected: type[Message] | None = None) -> HeaderWire:
+def decode_header(payload: bytes, topic: str = "?", expected: type[Message] | None = None) -> Header:
     """Check only a message's header (schema, version, the header's own fields), for a node that
     forwards or stores bytes without reading them; the arrays are checked by whoever decodes it.
     Raises the same :class:`DecodeError` as :func:`decode` for what it checks."""
-    if len(payload) > MAX_MESSAGE_BYTES:
-        raise DecodeError(topic, f"{len(payload)} bytes exceeds the {MAX_MESSAGE_BYTES}-byte limit", "oversized")
-    h = fast_header(payload)
-    cls = BY_SCHEMA.get(h.schema) if h is not None else None
+    _check_size(payload, topic)
+    h = _fast_header(payload)
+    cls = BY_SCHEMA.get(h.schema_name) if h is not None else None
     if cls is not None and cls.VERSION == h.version and (expected is None or expected is Message or cls is expected):
         return h
-    header = _checked_header(payload, topic, expected)[2]  # raises, unless pydantic takes what msgspec did not
-    return HeaderWire(**header.model_dump(by_alias=True))
+    return _checked_header(payload, topic, expected)[2]  # raises, unless pydantic takes what msgspec did not
+
+
+def _check_size(payload: bytes, topic: str) -> None:
+    if len(payload) > MAX_MESSAGE_BYTES:
+        raise DecodeError(topic, f"{len(payload)} bytes exceeds the {MAX_MESSAGE_BYTES}-byte limit", "oversized")
 
 
 def _by_schema(payload: bytes) -> type[Message] | None:

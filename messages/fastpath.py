@@ -154,31 +154,19 @@ class _Peek(msgspec.Struct):  # only the header; every other key is skipped in C
 _peek = msgspec.msgpack.Decoder(_Peek)
 
 
-class HeaderWire(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    """messages.Header as it travels (wire names), checked in C: what a header-only reader gets."""
-    schema: str
-    version: int
-    publisher: str = ""
-    seq: int = 0
-    frame: int = 0
-    capture_time_s: float = 0.0
-    entry_time_ns: int = 0
+def header_decoder(header_cls: type[BaseModel]) -> Callable[[bytes], BaseModel | None]:
+    """``read(payload)``: the checked header of an encoded message as a ``header_cls`` instance (the
+    rest of the message is skipped, not checked), or None when it has no valid one."""
+    compiled = compile_model(header_cls)
+    decoder = msgspec.msgpack.Decoder(msgspec.defstruct("HeaderOnly", [("header", compiled.struct)]))
 
+    def read(payload: bytes) -> BaseModel | None:
+        try:
+            return compiled.build(decoder.decode(payload).header)
+        except Exception:  # garbage of any kind: the checked path says what is wrong
+            return None
 
-class _HeaderOnly(msgspec.Struct):
-    header: HeaderWire
-
-
-_header_only = msgspec.msgpack.Decoder(_HeaderOnly)
-
-
-def fast_header(payload: bytes) -> HeaderWire | None:
-    """The checked header of an encoded message (the rest is skipped, not checked), or None when
-    it has no valid one."""
-    try:
-        return _header_only.decode(payload).header
-    except Exception:  # garbage of any kind: the checked path says what is wrong
-        return None
+    return read
 
 
 def peek_header(payload: bytes) -> dict:

@@ -39,7 +39,7 @@ from pydantic import BaseModel, ConfigDict
 
 from messages import ALL_MESSAGES, DecodeError, Header, Heartbeat, Latency, Message, decode, encode
 from messages.codec import MAX_MESSAGE_BYTES, decode_header
-from messages.fastpath import HeaderWire, array_fields, prepare
+from messages.fastpath import array_fields, prepare
 from nodes.spec import NodeSpec
 
 HEARTBEAT_PERIOD_S = 1.0
@@ -344,7 +344,7 @@ class NodeContext:
             return None
         return (logical, msg) if self.account(wire, header) else None
 
-    def account(self, wire: str, h: Header | HeaderWire) -> bool:
+    def account(self, wire: str, h: Header) -> bool:
         """Count a received message by its header (sequence gaps, restarts, latency); False for a
         sibling replica's."""
         if self.spec.replicas > 1 and h.frame % self.spec.replicas != self.spec.replica:

@@ -161,7 +161,7 @@ def test_rejects_oversized():
 @pytest.mark.parametrize("msg", samples(), ids=lambda m: m.SCHEMA)
 def test_header_only_reads_the_header_of_every_message(msg):
     h = decode_header(encode(msg), "t", type(msg))
-    assert (h.schema, h.version, h.seq, h.frame, h.entry_time_ns) == (
+    assert (h.schema_name, h.version, h.seq, h.frame, h.entry_time_ns) == (
         msg.SCHEMA, msg.VERSION, msg.header.seq, msg.header.frame, msg.header.entry_time_ns)
 
 
