@@ -64,6 +64,7 @@ def add_parser(sub) -> None:
     g.add_argument("--no-plots", action="store_true")
     g.add_argument("--swivel", action="store_true", help=BEYOND_THESIS_HELP["swivel"])
     g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
+    g.add_argument("--limb-memory", action="store_true", help=BEYOND_THESIS_HELP["limb_memory"])
     g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
     g.add_argument("--pose-memory", action="store_true", help=POSE_MEMORY_HELP)
     g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
@@ -153,7 +154,7 @@ def run_gaps(args) -> int:
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
-                                          "segment_carry": args.segment_carry},
+                                          "segment_carry": args.segment_carry, "limb_memory": args.limb_memory},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
                             pose_memory=args.pose_memory))
@@ -204,6 +205,7 @@ def run_gaps(args) -> int:
 
 def options_text(args) -> str:
     on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
+                                  ("--limb-memory", args.limb_memory),
                                   ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory)) if flag]
     if args.reacquire_step:
         on.append(f"--reacquire-step {args.reacquire_step}")

@@ -31,6 +31,7 @@ from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
 from mocap_core.ik.solvers_kernels import solve
+from mocap_core.limb_memory import LIMB_MEMORY_HELP, LimbMemory
 from mocap_core.skeleton import INDEX, LIMBS, PARENT, Status
 
 MISSING, ESTIMATED, HELD = int(Status.MISSING), int(Status.ESTIMATED), int(Status.HELD)
@@ -46,16 +47,19 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
 LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
 # The gap-filling options beyond the thesis, as the studio launch files, `mocap solve` and
 # `mocap eval timing --beyond` use them (README "Results").
-BEYOND_THESIS = {"swivel": True, "segment_carry": True, "reacquire_step_m": 0.01}
+BEYOND_THESIS = {"swivel": True, "segment_carry": True, "limb_memory": True, "reacquire_step_m": 0.01}
 # What each of them does, said once for the node's params and `mocap eval gaps --help`.
 BEYOND_THESIS_HELP = {
     "swivel": "beyond the thesis: missing joints between two located ones from bone lengths and the swivel "
               "angle carried in the next joint's or the limb parent's frame",
     "segment_carry": "beyond the thesis: a lost ankle moves with its still-tracked foot (heel and toe markers), "
                      "a lost hand or toe with the last tracked bone before it",
+    "limb_memory": LIMB_MEMORY_HELP + " (with swivel)",
     "reacquire_step_m": "beyond the thesis: close the gap to returning markers by at most this many metres a "
                         "frame (0 = the thesis's method: jump)",
 }
+# The limb whose poses, mirrored, each limb also remembers (limb memory).
+MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
 CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 
@@ -74,7 +78,7 @@ class LimbFiller:
 
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
-                 segment_carry: bool = False):
+                 segment_carry: bool = False, limb_memory: bool = False):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -99,6 +103,10 @@ class LimbFiller:
         self.swivel = swivel
         self.bend, self.bend_ok = np.zeros((n, n + 1, 2, 3)), np.zeros((n, n + 1, 2), bool)
         self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
+        other = MIRRORED.get(limb)
+        self.memory = LimbMemory(n, None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]]))\
+            if limb_memory else None
+        self.no_recall = np.full((n, 3), np.nan)
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
@@ -119,10 +127,14 @@ class LimbFiller:
             out[1] += af.carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames)
         if self.swivel:
             af.learn_directions(positions, frames, status, idx, self.dir_sum, self.dir_sq, self.dir_n)
+            recalled = self.no_recall
+            if self.memory is not None:
+                self.memory.learn(positions, frames, status, idx, self.parent_of_root)
+                recalled = self.memory.recall(positions, frames, status, idx, self.parent_of_root)
             if self.has_prev[0]:
                 out[0] += af.swivel_fill(positions, frames, status, idx, self.parent_of_root, prev_pos, prev_frames,
                                          self.prev_parent_frame, self.bend, self.bend_ok, self.dir_sum,
-                                         self.dir_sq, self.dir_n)
+                                         self.dir_sq, self.dir_n, recalled)
         p = self.params
         _fill_limb(positions, frames, status, self.joints, self.parent_of_root, self.limb.endswith("arm"),
                    self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
@@ -208,9 +220,10 @@ class GapFiller:
 
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
-                 segment_carry: bool = False):
+                 segment_carry: bool = False, limb_memory: bool = False):
         constraints = constraints if constraints is not None else load_constraints()
-        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel, segment_carry)
+        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel, segment_carry,
+                                       limb_memory)
                       for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status) -> dict[str, FillStats]:
