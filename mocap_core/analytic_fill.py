@@ -32,7 +32,7 @@ TURN_WEIGHT = 1.0
 FIT_STEPS = 360     # a coarse pass over the whole circle (1 degree), then a fine one around the best
 # With the limb memory (mocap_core.limb_memory) on, the joint is also pulled towards where the earlier
 # poses had it, as if that point were this far off (SD, metres). Dance set, elbows hidden from 1 s
-# (prototype): 0.017 m left dance2 and walk2 at 31-44 mm mean, 0.0095 at 14-36, 0.0055 at 12-39.
+# (prototype): 0.017 m left dance2 and walk2 at 19-34 mm mean, 0.0095 at 14-36, 0.0055 at 12-39.
 MEMORY_SD = 0.01
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 

@@ -14,8 +14,8 @@ lengths stay exact.
 Each limb also remembers the other limb's poses, mirrored across the body (the parent frame's x
 runs to the subject's left, so a mirror negates it), and keeps learning them while its own joint is
 lost: a dancer does with one arm what the other did. On the dance set, with the elbow hidden from
-1 s, the own poses alone (one second of them) left dance2 and walk2 at 40-57 mm; pooled with the
-other arm's, 14-42 mm (prototype, joints level).
+1 s, the own poses alone (one second of them) left dance2 and walk2 at 23-57 mm; pooled with the
+other arm's, 14-42 mm, and with the usual direction too 14-36 (prototype, joint level).
 
 Like the pose memory of the hip stage, it learns only from located joints, never from filled ones.
 """
@@ -112,8 +112,8 @@ def _recall(positions, frames, status, idx, parent, keys, vals, state, pred):
         found = 0
         for src in range(2):
             for s in range(state[k, src, 0]):
-                g = keys[k, src, s] - key
-                d = vnorm(g)
+                d = ((keys[k, src, s, 0] - key[0]) ** 2 + (keys[k, src, s, 1] - key[1]) ** 2
+                     + (keys[k, src, s, 2] - key[2]) ** 2)  # squared until the neighbours are known
                 if found == NEIGHBOURS and d >= best_d[found - 1]:
                     continue
                 j = found if found < NEIGHBOURS else NEIGHBOURS - 1   # insert, keeping best_d sorted
@@ -126,7 +126,7 @@ def _recall(positions, frames, status, idx, parent, keys, vals, state, pred):
                 found = min(found + 1, NEIGHBOURS)
         total, mean = 0.0, np.zeros(3)
         for j in range(found):
-            w = 1.0 / (best_d[j] + 1e-3)
+            w = 1.0 / (np.sqrt(best_d[j]) + 1e-3)
             total += w
             mean += w * best_v[j]
         pred[k] = positions[a] + mv(ref, mean / total)
