@@ -25,26 +25,25 @@ import numpy as np
 from numba import njit
 
 from mocap_core.analytic_fill import LOCATED, MISSING, all_finite
-from mocap_core.ik.kernels import mtv, mv, vnorm
+from mocap_core.ik.kernels import mtv, mv
+from mocap_core.remembered_poses import CAPACITY, keep, nearest  # per joint and source; a pose per 5 mm
 
 LIMB_MEMORY_HELP = ("beyond the thesis: the swivel of a lone missing joint pulled towards where the limb's earlier "
                     "poses, and the other limb's mirrored, had it with the next joint where it is now")
 NEIGHBOURS = 20     # remembered poses averaged
-CAPACITY = 4000     # poses kept per joint and source (own, mirrored); the oldest make room
-MIN_MOVE_M = 0.005  # a pose is kept when the next joint has moved this far (parent frame) from the last kept
 MIN_POSES = 30      # poses before the memory is trusted
 MIRROR = np.array([-1.0, 1.0, 1.0])
 
 
 class LimbMemory:
-    """State of one limb's memory: per middle joint k of the chain (k-1, k, k+1), the poses of the
-    limb itself [0] and of the other limb, mirrored [1]. ``other``: the other limb's chain indices
+    """State of one limb's memory: per middle joint k of the chain (k-1, k, k+1), a ring of the limb's
+    own poses [0] and one of the other limb's, mirrored [1]. ``other``: the other limb's chain indices
     (same length), or None."""
 
     def __init__(self, n: int, other: np.ndarray | None):
         self.other = np.asarray(other if other is not None else np.full(n, -1), np.int64)
         self.keys = np.full((n, 2, CAPACITY, 3), np.inf)   # the next joint from the one before (parent frame)
-        self.vals = np.zeros((n, 2, CAPACITY, 3))          # the middle joint from the one before
+        self.vals = np.zeros((n, 2, CAPACITY, 1, 3))       # the middle joint from the one before
         self.state = np.zeros((n, 2, 2), np.int64)         # poses kept, where the next one goes
         self.last = np.full((n, 2, 3), np.inf)             # the last key kept
         self.pred = np.full((n, 3), np.nan)                # this frame's recalled positions (world)
@@ -55,19 +54,6 @@ class LimbMemory:
     def recall(self, positions, frames, status, idx, parent) -> np.ndarray:
         _recall(positions, frames, status, idx, parent, self.keys, self.vals, self.state, self.pred)
         return self.pred
-
-
-@njit(cache=True)
-def _keep(k, src, key, val, keys, vals, state, last):
-    gap = key - last[k, src]
-    if np.isfinite(gap[0]) and vnorm(gap) < MIN_MOVE_M:
-        return
-    slot = state[k, src, 1]
-    keys[k, src, slot] = key
-    vals[k, src, slot] = val
-    state[k, src, 0] = min(state[k, src, 0] + 1, CAPACITY)
-    state[k, src, 1] = (slot + 1) % CAPACITY
-    last[k, src] = key
 
 
 @njit(cache=True)
@@ -88,7 +74,7 @@ def _learn(positions, frames, status, idx, other, parent, keys, vals, state, las
             key = mtv(ref, positions[b] - positions[a]) * sign
             val = mtv(ref, positions[m] - positions[a]) * sign
             if all_finite(key) and all_finite(val):
-                _keep(k, src, key, val, keys, vals, state, last)
+                keep(keys[k, src], vals[k, src], state[k, src], last[k, src], key, val.reshape(1, 3))
 
 
 @njit(cache=True)
@@ -99,7 +85,7 @@ def _recall(positions, frames, status, idx, parent, keys, vals, state, pred):
         return
     n = idx.shape[0]
     best_d = np.empty(NEIGHBOURS)
-    best_v = np.empty((NEIGHBOURS, 3))
+    best_i = np.empty(NEIGHBOURS, np.int64)
     for k in range(1, n - 1):
         a, m, b = idx[k - 1], idx[k], idx[k + 1]
         if status[m] != MISSING or status[a] == MISSING or status[b] == MISSING:
@@ -109,24 +95,13 @@ def _recall(positions, frames, status, idx, parent, keys, vals, state, pred):
         key = mtv(ref, positions[b] - positions[a])
         if not all_finite(key):
             continue
-        found = 0
-        for src in range(2):
-            for s in range(state[k, src, 0]):
-                d = ((keys[k, src, s, 0] - key[0]) ** 2 + (keys[k, src, s, 1] - key[1]) ** 2
-                     + (keys[k, src, s, 2] - key[2]) ** 2)  # squared until the neighbours are known
-                if found == NEIGHBOURS and d >= best_d[found - 1]:
-                    continue
-                j = found if found < NEIGHBOURS else NEIGHBOURS - 1   # insert, keeping best_d sorted
-                while j > 0 and best_d[j - 1] > d:
-                    best_d[j] = best_d[j - 1]
-                    best_v[j] = best_v[j - 1]
-                    j -= 1
-                best_d[j] = d
-                best_v[j] = vals[k, src, s]
-                found = min(found + 1, NEIGHBOURS)
+        best_d[:] = np.inf  # both rings, own and mirrored, into one list
+        nearest(keys[k, 0], state[k, 0, 0], key, best_d, best_i, 0)
+        nearest(keys[k, 1], state[k, 1, 0], key, best_d, best_i, CAPACITY)
         total, mean = 0.0, np.zeros(3)
-        for j in range(found):
-            w = 1.0 / (np.sqrt(best_d[j]) + 1e-3)
-            total += w
-            mean += w * best_v[j]
+        for j in range(NEIGHBOURS):
+            if best_d[j] < np.inf:
+                w = 1.0 / (best_d[j] + 1e-3)
+                total += w
+                mean += w * vals[k, best_i[j] // CAPACITY, best_i[j] % CAPACITY, 0]
         pred[k] = positions[a] + mv(ref, mean / total)

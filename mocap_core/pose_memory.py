@@ -32,6 +32,7 @@ from numba import njit
 
 from mocap_core.ik.kernels import mtv, mv, vfinite
 from mocap_core.profiles import LANDMARK_INDEX
+from mocap_core.remembered_poses import CAPACITY, keep, nearest  # poses a leg; a pose kept per 5 mm of the toe
 
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
                     "toe nearest where it is now had them (for marker sets with nothing else left on shank and foot)")
@@ -45,8 +46,6 @@ TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 # is seen are left to it.
 HEEL = "FCC"
 NEIGHBOURS = 20     # remembered poses averaged (dance1: 10 gives the same error, 20 half the jitter)
-CAPACITY = 4000     # poses kept per leg (the oldest make room)
-MIN_MOVE_M = 0.005  # a pose is remembered when its toe has moved this far from the last one kept
 FALLBACK_M = 0.1    # no own pose with the toe this near: the other leg's, mirrored, if one is nearer
 SMOOTHING = 0.5     # per frame: how far the estimate moves towards the remembered poses' mean
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
@@ -125,33 +124,6 @@ def pelvis_frame(lm, origin, rot):
 
 
 @njit(cache=True)
-def _keep(toes, offsets, state, last_kept, toe, pose):
-    """Remember one pose of a leg (its toe and its targets' offsets) if the toe has moved since the last."""
-    if np.sqrt(((toe - last_kept) ** 2).sum()) < MIN_MOVE_M:
-        return
-    i = state[1]
-    toes[i] = toe
-    offsets[i, :len(pose)] = pose
-    last_kept[:] = toe
-    state[1], state[0] = (i + 1) % CAPACITY, min(state[0] + 1, CAPACITY)
-
-
-@njit(cache=True)
-def _nearest(toes, count, toe, best_d, best_i):
-    """The NEIGHBOURS remembered toes nearest ``toe`` (distances, indices; nearest first), by insertion."""
-    best_d[:] = np.inf
-    for i in range(count):  # (written out: no temporary arrays in the loop)
-        dx, dy, dz = toes[i, 0] - toe[0], toes[i, 1] - toe[1], toes[i, 2] - toe[2]
-        d = np.sqrt(dx * dx + dy * dy + dz * dz)
-        if d < best_d[NEIGHBOURS - 1]:
-            j = NEIGHBOURS - 1
-            while j > 0 and best_d[j - 1] > d:
-                best_d[j], best_i[j] = best_d[j - 1], best_i[j - 1]
-                j -= 1
-            best_d[j], best_i[j] = d, i
-
-
-@njit(cache=True)
 def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_kept, last_seen, estimate, out):
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
@@ -177,18 +149,20 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
                 for t in range(nt):
                     seen[t] = mtv(rot, lm[legs[g, 3 + t]] - origin)
                     last_seen[g, t] = seen[t] - toe_share[g, t] * local_toe
-                _keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, seen[:nt])
+                keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, seen[:nt])
                 other = mirror[g]
                 if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
-                    _keep(toes[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
+                    keep(toes[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
                           local_toe * flip, seen[:nt] * flip)
             continue
         if state[g, 0, 0] < NEIGHBOURS:
             continue
-        _nearest(toes[g, 0], state[g, 0, 0], local_toe, best_d, best_i)
+        best_d[:] = np.inf
+        nearest(toes[g, 0], state[g, 0, 0], local_toe, best_d, best_i)
         source = 0
         if mirror[g] >= 0 and best_d[0] > FALLBACK_M and state[g, 1, 0] >= NEIGHBOURS:
-            _nearest(toes[g, 1], state[g, 1, 0], local_toe, other_d, other_i)
+            other_d[:] = np.inf
+            nearest(toes[g, 1], state[g, 1, 0], local_toe, other_d, other_i)
             if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
                 best_d[:], best_i[:], source = other_d, other_i, 1
         mean, mean_toe, total = np.zeros((nt, 3)), np.zeros(3), 0.0
