@@ -58,37 +58,37 @@ results-beyond: $(STAMP)
 	$(BIN)/mocap eval timing --constraints on --beyond --report docs/results/timing_beyond
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --reacquire-step 0.01 --report docs/results/knee_ankle_dance_beyond
+		--swivel --segment-carry --limb-memory --learned-lengths --reacquire-step 0.01 --report docs/results/knee_ankle_dance_beyond
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove knee_l,ankle_l --from 0.5 --to 2.0 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --reacquire-step 0.01 --report docs/results/knee_ankle_walk_beyond
+		--swivel --segment-carry --limb-memory --learned-lengths --reacquire-step 0.01 --report docs/results/knee_ankle_walk_beyond
 	$(BIN)/mocap eval gaps --remove elbow_l --from 1 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --rebuild --reacquire-step 0.01 --report docs/results/elbow_sprint_rebuild
+		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/elbow_sprint_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove foot_l --from 0.5 --to 1.5 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --rebuild --reacquire-step 0.01 --report docs/results/heel_walk_rebuild
+		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/heel_walk_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove pelvis --from 0.5 --to 2.0 --solvers ccd --constraints on --mode markers --hips-lost fit \
 		--report docs/results/pelvis_walk_fit
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove knee_l,ankle_l --from 0.5 --to 2.0 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_walk_rebuild
+		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_walk_rebuild
 	$(BIN)/mocap eval gaps --remove knee_l,ankle_l --from 1 --to 2.5 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_sprint_rebuild
+		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_sprint_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove elbow_l --from 0.3 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --rebuild --reacquire-step 0.01 --report docs/results/elbow_walk_rebuild
+		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/elbow_walk_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
 		--remove elbow_l --from 1 --to 20 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --rebuild --reacquire-step 0.01 --report docs/results/elbow_karate_rebuild
+		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/elbow_karate_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_dance_memory
+		--swivel --segment-carry --limb-memory --learned-lengths --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_dance_memory
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:walk1 \
 		--profile dance28 --remove knee_l,ankle_l --from 2 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_walk1_memory
+		--swivel --segment-carry --limb-memory --learned-lengths --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_walk1_memory
 	for take in dance1 dance2 walk1 walk2; do for side in l r; do \
 		$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:$$take \
 			--profile dance28 --remove elbow_$$side --from 1 --solvers ccd --constraints on --mode markers \
-			--swivel --segment-carry --limb-memory --reacquire-step 0.01 --report docs/results/elbow_swivel_$${take}_$$side \
+			--swivel --segment-carry --limb-memory --learned-lengths --reacquire-step 0.01 --report docs/results/elbow_swivel_$${take}_$$side \
 			|| exit 1; done; done

@@ -65,6 +65,7 @@ def add_parser(sub) -> None:
     g.add_argument("--swivel", action="store_true", help=BEYOND_THESIS_HELP["swivel"])
     g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
     g.add_argument("--limb-memory", action="store_true", help=BEYOND_THESIS_HELP["limb_memory"])
+    g.add_argument("--learned-lengths", action="store_true", help=BEYOND_THESIS_HELP["learned_lengths"])
     g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
     g.add_argument("--pose-memory", action="store_true", help=POSE_MEMORY_HELP)
     g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
@@ -108,7 +109,7 @@ def run_timing(args) -> int:
         w = csv.DictWriter(f, fieldnames=list(rows[0].as_dict()))
         w.writeheader()
         w.writerows(r.as_dict() for r in rows)
-    md = [f"Worst-case full-body gap fill{' with swivel, segment carry, limb memory and blend' if args.beyond else ''}, "
+    md = [f"Worst-case full-body gap fill{' with swivel, segment carry, limb memory, learned lengths and blend' if args.beyond else ''}, "
           f"{rec.source.split('/')[-1]} ({rows[0].frames} frames, "
           f"{args.repeats} pass(es)), ms per frame. Kernel load/compile before timing: {warmup_s:.2f} s. "
           "\"max, best of passes\": the largest of each frame's fastest pass (every pass does the same work; "
@@ -154,7 +155,8 @@ def run_gaps(args) -> int:
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
-                                          "segment_carry": args.segment_carry, "limb_memory": args.limb_memory},
+                                          "segment_carry": args.segment_carry, "limb_memory": args.limb_memory,
+                                          "learned_lengths": args.learned_lengths},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
                             pose_memory=args.pose_memory))
@@ -205,7 +207,7 @@ def run_gaps(args) -> int:
 
 def options_text(args) -> str:
     on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
-                                  ("--limb-memory", args.limb_memory),
+                                  ("--limb-memory", args.limb_memory), ("--learned-lengths", args.learned_lengths),
                                   ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory)) if flag]
     if args.reacquire_step:
         on.append(f"--reacquire-step {args.reacquire_step}")

@@ -63,6 +63,24 @@ def learn_directions(positions, frames, status, idx, dir_sum, dir_sq, dir_n):
 
 
 @njit(cache=True)
+def learn_lengths(positions, status, idx, lengths):
+    """Accumulate each bone's length (sum, count) while both its joints are located: bones are rigid,
+    and one frame's length (the last one seen before a gap) carries that frame's marker noise."""
+    for k in range(idx.shape[0] - 1):
+        if status[idx[k]] == LOCATED and status[idx[k + 1]] == LOCATED:
+            size = vnorm(positions[idx[k + 1]] - positions[idx[k]])
+            if np.isfinite(size):
+                lengths[k, 0] += size
+                lengths[k, 1] += 1
+
+
+@njit(cache=True)
+def _length(lengths, k, last):
+    """Bone k's learned length once MIN_SAMPLES frames showed it, else its length in the last frame."""
+    return lengths[k, 0] / lengths[k, 1] if lengths[k, 1] >= MIN_SAMPLES else last
+
+
+@njit(cache=True)
 def _frame_along(y, like):
     """A bone frame whose y runs along ``y``, turned from ``like`` by the shortest arc."""
     return mm(rotation_between(like[:, 1].copy(), y), like)
@@ -134,9 +152,11 @@ def usual_direction(k, dir_sum, dir_sq, dir_n):
 
 @njit(cache=True)
 def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, prev_pos, prev_frames,
-              bend, bend_ok, dir_sum, dir_sq, dir_n, recalled):
+              bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths):
     pa, pk, pb = prev_pos[a], prev_pos[k], prev_pos[b]
-    upper, lower = vnorm(pk - pa), vnorm(pb - pk)
+    upper, lower = _length(lengths, a, vnorm(pk - pa)), vnorm(pb - pk)
+    if b == k + 1:  # a lone joint: both its bones (a longer run keeps its last shape from k to b)
+        lower = _length(lengths, k, lower)
     root, target = positions[idx[a]].copy(), positions[idx[b]].copy()
     d = target - root
     dist = vnorm(d)
@@ -200,9 +220,10 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
 
 @njit(cache=True)
 def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, prev_parent, bend, bend_ok,
-                dir_sum, dir_sq, dir_n, recalled):
+                dir_sum, dir_sq, dir_n, recalled, lengths):
     """Fill every run of missing joints that has a located joint on both sides; returns how many.
-    ``recalled``: per chain joint, where the limb memory puts it (NaN: no memory)."""
+    ``recalled``: per chain joint, where the limb memory puts it (NaN: no memory); ``lengths``: the
+    learned bone lengths (learn_lengths)."""
     parent_now = frames[parent].copy()
     if not (all_finite(parent_now) and all_finite(prev_parent)):
         return 0
@@ -217,7 +238,7 @@ def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, p
         if b == n:  # no located joint after the run: Algorithm 1's carry handles it
             break
         filled += _fill_run(positions, frames, status, idx, k - 1, k, b, parent_now, prev_parent, prev_pos,
-                            prev_frames, bend, bend_ok, dir_sum, dir_sq, dir_n, recalled)
+                            prev_frames, bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths)
         k = b + 1
     return filled
 

@@ -32,6 +32,7 @@ class Params(BaseModel):
     swivel: bool = Field(False, description=BEYOND_THESIS_HELP["swivel"])
     segment_carry: bool = Field(False, description=BEYOND_THESIS_HELP["segment_carry"])
     limb_memory: bool = Field(False, description=BEYOND_THESIS_HELP["limb_memory"])
+    learned_lengths: bool = Field(False, description=BEYOND_THESIS_HELP["learned_lengths"])
     reacquire_step_m: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["reacquire_step_m"])
 
 
@@ -57,7 +58,7 @@ class IkGapfill(Node):
         p = self.params
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
                                  load_constraints(p.constraints_file), p.reacquire_step_m, p.swivel,
-                                 p.segment_carry, p.limb_memory)
+                                 p.segment_carry, p.limb_memory, p.learned_lengths)
         self.names = list(LIMB_CHAINS[p.limb])
 
     def on_message(self, topic, msg: SkeletonFrame) -> None:
