@@ -154,9 +154,13 @@ def usual_direction(k, dir_sum, dir_sq, dir_n):
 def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, prev_pos, prev_frames,
               bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths):
     pa, pk, pb = prev_pos[a], prev_pos[k], prev_pos[b]
-    upper, lower = _length(lengths, a, vnorm(pk - pa)), vnorm(pb - pk)
-    if b == k + 1:  # a lone joint: both its bones (a longer run keeps its last shape from k to b)
-        lower = _length(lengths, k, lower)
+    upper, lower = vnorm(pk - pa), vnorm(pb - pk)
+    if b == k + 1:  # a lone joint: both its bones as learned
+        upper, lower = _length(lengths, a, upper), _length(lengths, k, lower)
+    # (a longer run keeps its last shape, from the hip to the toe, say, with the knee, ankle and foot
+    # lost: its bones stay as they were, so the toe stays in reach. A learned thigh with the shape's
+    # last knee-toe distance left it out of reach on dance1, the plane of hip, knee and toe undefined,
+    # and the ankle 240 mm off where the last frame's lengths give 77.)
     root, target = positions[idx[a]].copy(), positions[idx[b]].copy()
     d = target - root
     dist = vnorm(d)
