@@ -198,7 +198,7 @@ def test_walk_knee_and_ankle_rebuilt_from_the_shank_and_foot_tracking_markers():
     runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["knee_l", "ankle_l"], 0.5, 2.0)
     knee, ankle = runs[True].stats(0), runs[True].stats(1)
     assert knee["mean"] < 0.02 and knee["max"] < 0.05 and ankle["mean"] < 0.01, (knee, ankle)
-    assert runs[False].stats(0)["mean"] > 0.025  # the swivel alone: 33 mm
+    assert runs[False].stats(0)["mean"] > 0.02  # the swivel alone: 33 mm; with limb memory and learned lengths 23
 
 
 def test_walk_elbow_rebuilt_with_the_forearm_wand():
@@ -210,8 +210,9 @@ def test_walk_elbow_rebuilt_with_the_forearm_wand():
 
 def test_karate_elbow_rebuilt_from_the_forearm_and_upper_arm_markers():
     """CMU's set has a lateral elbow marker only; its forearm (LFRM) and upper arm (LUPA) markers are
-    tracking markers of the profile. The swivel alone was 169 / 454 mm off."""
+    tracking markers of the profile. The swivel alone was 169 / 454 mm off (with the limb memory and
+    learned lengths 56 / 256)."""
     runs = _gap("08_cmu_135_02_karate_kata.c3d", "cmu41", ["elbow_l"], 1.0, 20.0)
     with_, without = runs[True].stats(), runs[False].stats()
     assert with_["mean"] < 0.03 and with_["max"] < 0.1, with_
-    assert with_["mean"] < 0.3 * without["mean"], (with_, without)
+    assert with_["mean"] < 0.4 * without["mean"], (with_, without)
