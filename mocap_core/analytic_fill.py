@@ -6,6 +6,8 @@
   located joint after the run, else of the limb's parent, and turned to where the bone's direction
   in that joint's frame is nearest its usual one, each of its three components weighted by how
   steady it has been (the forearm in the wrist's frame). The rest of the run keeps its last shape.
+  A lone joint's two bones are the last whole frame's, or (learn_lengths) their mean over the
+  frames that located them.
 - segment_carry: a lost ankle moves with its still-tracked foot (ankle, foot and toe are one body).
 - carry_lost_end: a lost end of the limb moves with the last tracked bone before it.
 - blend_reacquired: returning markers are met at most ``step`` metres a frame (inertialization).
