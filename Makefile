@@ -87,6 +87,10 @@ results-beyond: $(STAMP)
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:walk1 \
 		--profile dance28 --remove knee_l,ankle_l --from 2 --constraints on --mode markers \
 		--swivel --segment-carry --limb-memory --learned-lengths --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_walk1_memory
+	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
+		--remove knee_l,ankle_l --from 1 --to 20 --constraints on --mode markers \
+		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 \
+		--report docs/results/knee_ankle_karate_rebuild
 	for side in l r; do \
 		$(BIN)/mocap eval gaps --take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d \
 			--profile vicon53 --remove elbow_$$side --from 1 --constraints on --mode markers --swivel --segment-carry \

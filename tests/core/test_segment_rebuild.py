@@ -76,6 +76,39 @@ def test_tracking_markers_join_their_bone_known_answer():
         rebuilder.fill(moved.copy())
 
 
+def test_a_shaft_marker_and_a_landmark_carry_the_bone_known_answer():
+    """A shank seen only at its ankle marker and one shank tracking marker: two partners along the bone.
+    A swing (about an axis across their line) carries the knee marker exactly; a roll about their line
+    is not seen, so the knee is off by its chord: 2 r sin(roll / 2), r its distance from the line."""
+    ankle, wand, knee = np.array([0.0, 0.0, 0.1]), np.array([0.01, 0.02, 0.3]), np.array([0.05, 0.0, 0.5])
+    first = np.full((len(LANDMARKS), 3), np.nan)
+    first[LANDMARK_INDEX["L_FAL"]], first[LANDMARK_INDEX["L_FLE"]] = ankle, knee
+    rebuilder = SegmentRebuilder(("L_shank",))
+    rebuilder.fill(first.copy(), wand[None].copy())
+    line = (wand - ankle) / np.linalg.norm(wand - ankle)
+    across = np.cross(line, [1.0, 0.0, 0.0])
+    off = (knee - ankle) - ((knee - ankle) @ line) * line  # the knee from the partners' line
+    for roll in (0.0, 0.4):
+        turn = rotation(across, 0.9) @ rotation(line, roll)  # roll about the line first, then swing
+        shift = np.array([0.2, -0.3, 0.05])
+        moved = (first - ankle) @ turn.T + ankle + shift
+        moved_wand = (wand - ankle) @ turn.T + ankle + shift
+        lost = moved.copy()
+        lost[LANDMARK_INDEX["L_FLE"]] = np.nan
+        rebuilt = rebuilder.fill(lost, moved_wand[None].copy())
+        assert rebuilt[LANDMARK_INDEX["L_FLE"]]
+        error = np.linalg.norm(lost[LANDMARK_INDEX["L_FLE"]] - moved[LANDMARK_INDEX["L_FLE"]])
+        assert error == pytest.approx(2 * np.linalg.norm(off) * np.sin(roll / 2), abs=1e-9)
+    # two landmarks (the malleoli) run across the bone: not enough
+    both = first.copy()
+    both[LANDMARK_INDEX["L_TAM"]] = [-0.06, 0.0, 0.1]
+    plain = SegmentRebuilder()
+    plain.fill(both.copy())
+    lost = both.copy()
+    lost[LANDMARK_INDEX["L_FLE"]] = np.nan
+    assert not plain.fill(lost).any()
+
+
 def test_epicondyles_keep_their_learned_distances_to_the_upper_arm():
     """A rigid motion of the whole arm is still reproduced exactly with the upper arm's distances on; when
     the humerus slips 8 mm against the forearm's markers, the upper arm's three tracking markers, which
@@ -206,6 +239,15 @@ def test_walk_elbow_rebuilt_with_the_forearm_wand():
     runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["elbow_l"], 0.3)
     assert runs[True].stats()["mean"] < 0.01 and runs[True].stats()["max"] < 0.02, runs[True].stats()
     assert runs[False].stats()["mean"] > 1.5 * runs[True].stats()["mean"]  # the swivel alone: 7 mm
+
+
+def test_karate_knee_carried_by_its_ankle_and_shank_markers():
+    """CMU's shank has the ankle marker and one shank marker (LSHN) besides the knee's: two partners
+    along the bone. The knee hidden from 1 s to 20 s: the swivel alone was 66 / 409 mm off."""
+    runs = _gap("08_cmu_135_02_karate_kata.c3d", "cmu41", ["knee_l"], 1.0, 20.0)
+    with_, without = runs[True].stats(), runs[False].stats()
+    assert with_["mean"] < 0.03 and with_["max"] < 0.1, with_
+    assert with_["mean"] < 0.5 * without["mean"], (with_, without)
 
 
 def test_karate_elbow_rebuilt_from_the_forearm_and_upper_arm_markers():
