@@ -107,8 +107,9 @@ class LimbFiller:
         self.bend, self.bend_ok = np.zeros((n, n + 1, 2, 3)), np.zeros((n, n + 1, 2), bool)
         self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
         # Bone lengths learned online (issue 9): each bone's mean length over the frames that located both
-        # its joints (sum, count). Off, the swivel takes the lengths of the last whole frame, whose marker
-        # noise then lasts the whole gap (dance set walk2, left elbow hidden from 1 s: 23 -> 20 mm).
+        # its joints (sum, count). Off, the swivel takes the lengths of the last whole frame: its marker
+        # noise, and the stretch of a limb that straightened past its reach, then last the whole gap
+        # (dance set walk2, left elbow hidden from 1 s: 23 -> 20 mm).
         self.learned_lengths = learned_lengths
         self.lengths = np.zeros((n, 2))
         other = MIRRORED.get(limb)
