@@ -162,9 +162,13 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, refer
             if seen[k] and k < rigid:
                 count += 1
         _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
-        if count > MIN_SHAFT_PARTNERS:  # each seen member's reference: the segment as it is now, unless
-            for k in range(rigid):      # it has fewer partners than the one kept (which then stays)
-                if seen[k] and (count > MIN_PARTNERS or count - 1 >= _partners(reference[s, k], k, rigid)):
+        # Each seen member's reference: the segment as it is now, unless that has fewer partners than
+        # the one kept, which then stays. (The Vicon take's heel is lost in the frame before its ankle
+        # is: the last frame's reference had only the metatarsals, all on one line, and the ankle was
+        # never rebuilt. Keeping the earlier one took the knee from 100 to 49 mm, knee and ankle hidden.)
+        if count > MIN_SHAFT_PARTNERS:
+            for k in range(rigid):
+                if seen[k] and count - 1 >= _partners(reference[s, k], k, rigid):
                     for m in range(rigid):
                         if seen[m]:
                             reference[s, k, m] = lm[seg[m]]

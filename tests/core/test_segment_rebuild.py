@@ -109,6 +109,31 @@ def test_a_shaft_marker_and_a_landmark_carry_the_bone_known_answer():
     assert not plain.fill(lost).any()
 
 
+def test_a_reference_is_not_replaced_by_one_with_fewer_partners_known_answer():
+    """The foot: ankle, malleolus, heel, toe (the mean of two metatarsal tracking markers). The heel is
+    lost in the frame before the ankle is; the reference of the frame before that, with the heel, is
+    kept. Then the ankle and the malleolus are lost and the foot moves: heel and metatarsals carry the
+    ankle exactly (the metatarsals and the toe alone are on one line)."""
+    rng = np.random.default_rng(8)
+    first = np.full((len(LANDMARKS), 3), np.nan)
+    for name in ("L_FAL", "L_TAM", "L_FCC"):
+        first[LANDMARK_INDEX[name]] = rng.normal(scale=0.1, size=3)
+    metatarsals = rng.normal(scale=0.1, size=(2, 3))
+    first[LANDMARK_INDEX["L_FM2"]] = metatarsals.mean(axis=0)
+    rebuilder = SegmentRebuilder(("L_foot", "L_foot"))
+    rebuilder.fill(first.copy(), metatarsals.copy())
+    heel_lost = first.copy()
+    heel_lost[LANDMARK_INDEX["L_FCC"]] = np.nan
+    assert rebuilder.fill(heel_lost, metatarsals.copy())[LANDMARK_INDEX["L_FCC"]]  # from the first frame
+    rot, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.1, 0.4, -0.2])
+    moved, moved_metatarsals = first @ rot.T + shift, metatarsals @ rot.T + shift
+    lost = moved.copy()
+    lost[[LANDMARK_INDEX["L_FAL"], LANDMARK_INDEX["L_TAM"]]] = np.nan
+    rebuilt = rebuilder.fill(lost, moved_metatarsals.copy())
+    assert rebuilt[LANDMARK_INDEX["L_FAL"]]
+    np.testing.assert_allclose(lost[LANDMARK_INDEX["L_FAL"]], moved[LANDMARK_INDEX["L_FAL"]], atol=1e-9)
+
+
 def test_epicondyles_keep_their_learned_distances_to_the_upper_arm():
     """A rigid motion of the whole arm is still reproduced exactly with the upper arm's distances on; when
     the humerus slips 8 mm against the forearm's markers, the upper arm's three tracking markers, which
