@@ -54,54 +54,48 @@ results-blend: $(STAMP)
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --solvers ccd --constraints on --mode markers \
 		--reacquire-step 0.01 --report docs/results/knee_ankle_dance_blend
 
+# The gap-filling options beyond the thesis that the studio graphs use (gapfill.BEYOND_THESIS), as flags of
+# `mocap eval gaps`, with constraints on and the markers removed; a run adds its landmark fills
+# (--rebuild, --pose-memory).
+GAPS_BEYOND := --constraints on --mode markers --swivel --segment-carry --limb-memory --learned-lengths \
+	--reacquire-step 0.01
+
 results-beyond: $(STAMP)
 	$(BIN)/mocap eval timing --constraints on --beyond --report docs/results/timing_beyond
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
-		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --reacquire-step 0.01 --report docs/results/knee_ankle_dance_beyond
+		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 $(GAPS_BEYOND) --report docs/results/knee_ankle_dance_beyond
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
-		--remove knee_l,ankle_l --from 0.5 --to 2.0 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --reacquire-step 0.01 --report docs/results/knee_ankle_walk_beyond
-	$(BIN)/mocap eval gaps --remove elbow_l --from 1 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/elbow_sprint_rebuild
+		--remove knee_l,ankle_l --from 0.5 --to 2.0 $(GAPS_BEYOND) --report docs/results/knee_ankle_walk_beyond
+	$(BIN)/mocap eval gaps --remove elbow_l --from 1 $(GAPS_BEYOND) --rebuild --report docs/results/elbow_sprint_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
-		--remove foot_l --from 0.5 --to 1.5 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/heel_walk_rebuild
+		--remove foot_l --from 0.5 --to 1.5 $(GAPS_BEYOND) --rebuild --report docs/results/heel_walk_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove pelvis --from 0.5 --to 2.0 --solvers ccd --constraints on --mode markers --hips-lost fit \
 		--report docs/results/pelvis_walk_fit
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
-		--remove knee_l,ankle_l --from 0.5 --to 2.0 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_walk_rebuild
-	$(BIN)/mocap eval gaps --remove knee_l,ankle_l --from 1 --to 2.5 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/knee_ankle_sprint_rebuild
+		--remove knee_l,ankle_l --from 0.5 --to 2.0 $(GAPS_BEYOND) --rebuild --report docs/results/knee_ankle_walk_rebuild
+	$(BIN)/mocap eval gaps --remove knee_l,ankle_l --from 1 --to 2.5 $(GAPS_BEYOND) --rebuild --report docs/results/knee_ankle_sprint_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
-		--remove elbow_l --from 0.3 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/elbow_walk_rebuild
+		--remove elbow_l --from 0.3 $(GAPS_BEYOND) --rebuild --report docs/results/elbow_walk_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
-		--remove elbow_l --from 1 --to 20 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/elbow_karate_rebuild
+		--remove elbow_l --from 1 --to 20 $(GAPS_BEYOND) --rebuild --report docs/results/elbow_karate_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
-		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_dance_memory
+		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 $(GAPS_BEYOND) --pose-memory --report docs/results/knee_ankle_dance_memory
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:walk1 \
-		--profile dance28 --remove knee_l,ankle_l --from 2 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --pose-memory --reacquire-step 0.01 --report docs/results/knee_ankle_walk1_memory
+		--profile dance28 --remove knee_l,ankle_l --from 2 $(GAPS_BEYOND) --pose-memory --report docs/results/knee_ankle_walk1_memory
 	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
-		--remove knee_l,ankle_l --from 1 --to 20 --constraints on --mode markers \
-		--swivel --segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 \
+		--remove knee_l,ankle_l --from 1 --to 20 $(GAPS_BEYOND) --rebuild \
 		--report docs/results/knee_ankle_karate_rebuild
 	for side in l r; do \
 		$(BIN)/mocap eval gaps --take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d \
-			--profile vicon53 --remove elbow_$$side --from 1 --constraints on --mode markers --swivel --segment-carry \
-			--limb-memory --learned-lengths --rebuild --reacquire-step 0.01 --report docs/results/elbow_vicon_rebuild_$$side \
+			--profile vicon53 --remove elbow_$$side --from 1 $(GAPS_BEYOND) --rebuild \
+			--report docs/results/elbow_vicon_rebuild_$$side \
 			|| exit 1; \
 		$(BIN)/mocap eval gaps --take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d \
-			--profile vicon53 --remove knee_$$side,ankle_$$side --from 1 --constraints on --mode markers --swivel \
-			--segment-carry --limb-memory --learned-lengths --rebuild --reacquire-step 0.01 \
+			--profile vicon53 --remove knee_$$side,ankle_$$side --from 1 $(GAPS_BEYOND) --rebuild \
 			--report docs/results/knee_ankle_vicon_rebuild_$$side || exit 1; done
 	for take in dance1 dance2 walk1 walk2; do for side in l r; do \
 		$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:$$take \
-			--profile dance28 --remove elbow_$$side --from 1 --solvers ccd --constraints on --mode markers \
-			--swivel --segment-carry --limb-memory --learned-lengths --reacquire-step 0.01 --report docs/results/elbow_swivel_$${take}_$$side \
+			--profile dance28 --remove elbow_$$side --from 1 --solvers ccd $(GAPS_BEYOND) \
+			--report docs/results/elbow_swivel_$${take}_$$side \
 			|| exit 1; done; done
