@@ -11,7 +11,7 @@ from typing import get_args
 from tqdm import tqdm
 
 from mocap_cli.measure import LAYOUTS
-from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, localize_take, reacquisition_jump,
+from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, gap_windows, localize_take, transition_moves,
                                     worst_case_timing)
 from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
 from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
@@ -72,6 +72,13 @@ def add_parser(sub) -> None:
                    help=f"(with --remove pelvis) {WHEN_LOST_HELP}")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
                    help=BEYOND_THESIS_HELP["reacquire_step_m"])
+    g.add_argument("--blend-half-life", type=float, default=0.0, metavar="S",
+                   help=BEYOND_THESIS_HELP["blend_half_life_s"])
+    g.add_argument("--gap-length", type=float, metavar="S",
+                   help="short gaps instead of one: hide the joints for S seconds at a time, one gap every "
+                        "--gap-every seconds from --from to --to (a studio's occlusions are mostly short)")
+    g.add_argument("--gap-every", type=float, default=0.5, metavar="S",
+                   help="with --gap-length: seconds from one gap's start to the next's (default 0.5)")
     g.set_defaults(func=run_gaps)
 
     lt = esub.add_parser("latency", help="end-to-end latency of the full graph fed by the QTM emulator",
@@ -145,6 +152,14 @@ def run_gaps(args) -> int:
     if not 0 < start < stop:
         raise SystemExit(f"--from {args.start_s} / --to {args.stop_s}: the gap must start after frame 0 and end "
                          f"after it starts (take: {rec.n_frames / rec.rate_hz:.2f} s)")
+    short_gaps = None
+    if args.gap_length is not None:
+        short_gaps = (int(round(args.gap_length * rec.rate_hz)), int(round(args.gap_every * rec.rate_hz)))
+        try:
+            gap_windows(start, stop, *short_gaps)
+        except ValueError as e:
+            raise SystemExit(f"--gap-length {args.gap_length} / --gap-every {args.gap_every} at "
+                             f"{rec.rate_hz:g} Hz: {e}") from None
     solvers = list(SOLVERS) if args.solvers == "all" else args.solvers.split(",")
     modes = ["markers", "joint"] if args.mode == "both" else [args.mode]
     cons = {"on": [True], "off": [False], "both": [False, True]}[args.constraints]
@@ -156,10 +171,11 @@ def run_gaps(args) -> int:
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry, "limb_memory": args.limb_memory,
-                                          "learned_lengths": args.learned_lengths},
+                                          "learned_lengths": args.learned_lengths,
+                                          "blend_half_life_s": args.blend_half_life},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
-                            pose_memory=args.pose_memory))
+                            pose_memory=args.pose_memory, short_gaps=short_gaps, rate_hz=rec.rate_hz))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -172,22 +188,30 @@ def run_gaps(args) -> int:
         w.writeheader()
         w.writerows(rows)
     gap_s = (stop - start) / rec.rate_hz
-    md = [f"{', '.join(joints)} hidden from {start / rec.rate_hz:.2f} s for {gap_s:.2f} s "
-          f"({stop - start} frames) of {rec.source.split('/')[-1]}; distance to the localized reference, metres.",
+    hidden = (f"hidden from {start / rec.rate_hz:.2f} s for {gap_s:.2f} s ({stop - start} frames)" if short_gaps is None
+              else f"hidden {args.gap_length:g} s ({short_gaps[0]} frames) in every {args.gap_every:g} s from "
+                   f"{start / rec.rate_hz:.2f} s to {stop / rec.rate_hz:.2f} s ({len(runs[0].windows)} gaps, "
+                   f"{len(runs[0].frames)} frames)")
+    md = [f"{', '.join(joints)} {hidden} of {rec.source.split('/')[-1]}; distance to the localized reference, "
+          "metres.",
           "", f"Options: {options_text(args)}.", "",
           "| removed by | solver | constraints | joint | min | max | mean | median | std | variance |",
           "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         md.append(f"| {r['mode']} | {r['solver']} | {r['constraints']} | {r['joint']} | {r['min']:.3f} | "
                   f"{r['max']:.3f} | {r['mean']:.3f} | {r['median']:.3f} | {r['std']:.3f} | {r['variance']:.4f} |")
-    if stop < rec.n_frames:
-        md += ["", "Re-acquisition: largest per-frame move around the frame the markers return, next to the "
-               "joint's normal per-frame motion (95th percentile of the reference).", "",
-               "| removed by | solver | constraints | joint | jump mm | normal mm | ratio |", "|---|---|---|---|---|---|---|"]
-        for r in runs:
-            for j in reacquisition_jump(r, reference, stop):
-                md.append(f"| {r.mode} | {r.solver} | {'on' if r.constraints else 'off'} | {j['joint']} | "
-                          f"{j['jump_m'] * 1000:.1f} | {j['normal_step_m'] * 1000:.1f} | {j['ratio']:.2f} |")
+    md += ["", "Loss and re-acquisition: the largest per-frame move within 3 frames of where the markers go and "
+           "come back (over every gap), next to the joint's normal per-frame motion (95th percentile of the "
+           "reference); \"added\": the largest move the fill adds to the reference's own there "
+           "(|step of the estimate - step of the reference|), which leaves out the actor's own fast moves.", "",
+           "| removed by | solver | constraints | joint | normal mm | loss move mm | loss ratio | loss added "
+           "| return move mm | return ratio | return added |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in runs:
+        for j in transition_moves(r, reference):
+            md.append(f"| {r.mode} | {r.solver} | {'on' if r.constraints else 'off'} | {j['joint']} | "
+                      f"{j['normal_step_m'] * 1000:.1f} | {j['loss_move_m'] * 1000:.1f} | {j['loss_ratio']:.2f} | "
+                      f"{j['loss_added_ratio']:.2f} | {j['return_move_m'] * 1000:.1f} | {j['return_ratio']:.2f} | "
+                      f"{j['return_added_ratio']:.2f} |")
     (out / "gaps.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     if not args.no_plots:
@@ -211,6 +235,8 @@ def options_text(args) -> str:
                                   ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory)) if flag]
     if args.reacquire_step:
         on.append(f"--reacquire-step {args.reacquire_step}")
+    if args.blend_half_life:
+        on.append(f"--blend-half-life {args.blend_half_life}")
     if args.hips_lost != "hold":
         on.append(f"--hips-lost {args.hips_lost}")
     return " ".join(on) or "none beyond the thesis"

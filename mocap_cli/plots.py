@@ -17,8 +17,10 @@ COLOURS = {"ccd": "tab:blue", "fabrik": "tab:red", "jacobian_transpose": "tab:gr
 def error_plot(runs, rate_hz: float, path: Path, title: str) -> None:
     fig, ax = plt.subplots(figsize=(8, 3.6), dpi=110)
     for r in runs:
-        t = r.frames / rate_hz
-        ax.plot(t, r.error_m[:, 0], label=f"{r.solver}", color=COLOURS.get(r.solver), lw=1.2)
+        frames = np.arange(r.frames[0], r.frames[-1] + 1)
+        error = np.full(len(frames), np.nan)  # NaN between short gaps breaks the line there
+        error[r.frames - r.frames[0]] = r.error_m[:, 0]
+        ax.plot(frames / rate_hz, error, label=f"{r.solver}", color=COLOURS.get(r.solver), lw=1.2)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"distance to true {runs[0].joints[0]} (m)")
     ax.set_title(title)

@@ -49,7 +49,7 @@ def run(args) -> int:
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)
     pipe = SkeletonPipeline(profile, rec.labels, args.solver, params, load_constraints(args.constraints),
-                            fill_gaps=not args.no_ik, beyond=not args.thesis)
+                            fill_gaps=not args.no_ik, beyond=not args.thesis, rate_hz=rec.rate_hz)
     times = rec.times()
     counts = {s: 0 for s in Status}
     t0 = time.perf_counter()

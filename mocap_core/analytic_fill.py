@@ -10,7 +10,8 @@
   frames that located them.
 - segment_carry: a lost ankle moves with its still-tracked foot (ankle, foot and toe are one body).
 - carry_lost_end: a lost end of the limb moves with the last tracked bone before it.
-- blend_reacquired: returning markers are met at most ``step`` metres a frame (inertialization).
+- blend_transitions: a joint that changes source (markers lost or back) goes on where it was heading,
+  and the offset to the new source dies out (inertialization).
 """
 from __future__ import annotations
 
@@ -36,6 +37,8 @@ FIT_STEPS = 360     # a coarse pass over the whole circle (1 degree), then a fin
 # poses had it, as if that point were this far off (SD, metres). Dance set, elbows hidden from 1 s
 # (prototype): 0.017 m left dance2 and walk2 at 19-34 mm mean, 0.0095 at 14-36, 0.0055 at 12-39.
 MEMORY_SD = 0.01
+# A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.
+BLEND_X = 1.6783469900166612
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 
 
@@ -293,22 +296,51 @@ def carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames):
 
 
 @njit(cache=True)
-def blend_reacquired(positions, status, idx, last_out, last_status, has_last, offset, step):
-    """When a joint's markers come back, start from where the estimate had it and close the gap by at
-    most ``step`` metres a frame (a rate-limited decaying offset)."""
+def blend_transitions(positions, status, idx, last_out, prev_out, last_status, has_last, offset, offset_vel, step,
+                      omega, dt):
+    """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
+
+    With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
+    had it and close the gap by at most ``step`` metres a frame (a rate-limited decaying offset).
+    With ``omega`` > 0 (blend_half_life_s): at every change of status, lost or found, the output goes on
+    where it was heading (its last position plus its last step) and the offset from there to the new
+    source dies out as a critically damped spring (Holden's, exact for any ``dt``), by at most ``step``
+    a frame when that is set. At loss the offset is the truth the estimate has not got: over a short
+    gap it keeps the joint near its markers' last course."""
     n = idx.shape[0]
-    if has_last[0]:
-        for k in range(n):
-            s = status[idx[k]]
+    decay = math.exp(-omega * dt)
+    for k in range(n):
+        j = idx[k]
+        s = status[j]
+        if not has_last[0] or s == MISSING or not all_finite(positions[j]):
+            offset[k] = 0.0
+            offset_vel[k] = 0.0
+        elif omega > 0:
+            was = last_status[k]
+            if s != was and was != MISSING and all_finite(last_out[k]):
+                heading = 2 * last_out[k] - prev_out[k] if all_finite(prev_out[k]) else last_out[k]
+                offset[k] = heading - positions[j]
+                offset_vel[k] = 0.0
+            else:
+                before = offset[k].copy()
+                spring = offset_vel[k] + omega * before
+                offset[k] = decay * (before + spring * dt)
+                offset_vel[k] = decay * (offset_vel[k] - spring * omega * dt)
+                moved = vnorm(offset[k] - before)
+                if step > 0 and moved > step:
+                    offset[k] = before + (offset[k] - before) * (step / moved)
+            positions[j] += offset[k]
+        else:
             if s == LOCATED and (last_status[k] == ESTIMATED or last_status[k] == HELD) and all_finite(last_out[k]):
-                offset[k] = last_out[k] - positions[idx[k]]
+                offset[k] = last_out[k] - positions[j]
             if s != LOCATED:
                 offset[k] = 0.0
             size = vnorm(offset[k])
             if size > 0:
                 offset[k] *= min(1.0, max(0.0, (size - step) / size))
-                positions[idx[k]] += offset[k]
+                positions[j] += offset[k]
     for k in range(n):
+        prev_out[k] = last_out[k]
         last_out[k] = positions[idx[k]]
         last_status[k] = status[idx[k]]
     has_last[0] = True

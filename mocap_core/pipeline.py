@@ -11,7 +11,7 @@ from typing import Iterator
 
 import numpy as np
 
-from mocap_core.gapfill import BEYOND_THESIS, GapFiller
+from mocap_core.gapfill import BEYOND_THESIS, DEFAULT_FRAME_S, GapFiller
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
@@ -36,10 +36,12 @@ class SolvedChunk:
 class SkeletonPipeline:
     def __init__(self, profile: Profile, labels: list[str], solver: str = "ccd",
                  params: SolverParams | None = None, constraints: Constraints | None = None,
-                 fill_gaps: bool = True, beyond: bool = False):
+                 fill_gaps: bool = True, beyond: bool = False, rate_hz: float | None = None):
         """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
         to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles
-        from the pose memory, swivel, segment carry, re-acquisition blend)."""
+        from the pose memory, swivel, segment carry, the blends at loss and re-acquisition). ``rate_hz``:
+        the take's frame rate, which paces the blends (else gapfill.DEFAULT_FRAME_S a frame)."""
+        self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         on = beyond and fill_gaps  # the landmark fills are gap fills
@@ -63,7 +65,7 @@ class SkeletonPipeline:
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:
             for f in range(len(pos)):
-                self.filler.fill(pos[f], frames[f], status[f])
+                self.filler.fill(pos[f], frames[f], status[f], (start + f) * self.frame_s)
         return SolvedChunk(start, pos, frames, status)
 
     def run(self, markers: np.ndarray, chunk: int = 250) -> Iterator[SolvedChunk]:

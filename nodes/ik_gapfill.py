@@ -34,6 +34,7 @@ class Params(BaseModel):
     limb_memory: bool = Field(False, description=BEYOND_THESIS_HELP["limb_memory"])
     learned_lengths: bool = Field(False, description=BEYOND_THESIS_HELP["learned_lengths"])
     reacquire_step_m: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["reacquire_step_m"])
+    blend_half_life_s: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["blend_half_life_s"])
 
 
 class IkGapfill(Node):
@@ -58,12 +59,12 @@ class IkGapfill(Node):
         p = self.params
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
                                  load_constraints(p.constraints_file), p.reacquire_step_m, p.swivel,
-                                 p.segment_carry, p.limb_memory, p.learned_lengths)
+                                 p.segment_carry, p.limb_memory, p.learned_lengths, p.blend_half_life_s)
         self.names = list(LIMB_CHAINS[p.limb])
 
     def on_message(self, topic, msg: SkeletonFrame) -> None:
         pos, frames, status = from_message(msg)
-        stats = self.filler.fill(pos, frames, status)
+        stats = self.filler.fill(pos, frames, status, msg.header.capture_time_s)
         if self.params.limb == "torso":
             self.ctx.publish("skeleton/torso", to_message(pos, frames, status), source=msg)
             return
