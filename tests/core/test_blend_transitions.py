@@ -1,0 +1,122 @@
+"""The blend at both ends of a gap (analytic_fill.blend_transitions, LimbFiller's blend_half_life_s)."""
+import math
+
+import numpy as np
+import pytest
+
+from mocap_core import analytic_fill as af
+from mocap_core.experiments import gap_run, transition_moves
+from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.profiles import load_profile
+from mocap_core.recordings import read_recording
+from mocap_core.skeleton import Status
+from tests.conftest import data_file
+
+LOCATED, ESTIMATED = int(Status.LOCATED), int(Status.ESTIMATED)
+VELOCITY = np.array([0.5, 0.0, 0.0])   # m/s, the joint's true motion: a straight line
+BIAS = np.array([0.0, 0.05, 0.0])      # the estimate is 50 mm off the truth while the markers are lost
+HALF_LIFE = 0.1
+
+
+def run(rate_hz: float, lost: range, half_life: float = HALF_LIFE, step: float = 0.0, frames: int = 80):
+    """One joint moving along a line; in the ``lost`` frames its source is an estimate BIAS off the
+    truth. Returns the output and the truth, per frame."""
+    dt = 1.0 / rate_hz
+    omega = af.BLEND_X / half_life if half_life > 0 else 0.0
+    state = dict(last_out=np.zeros((1, 3)), prev_out=np.full((1, 3), np.nan), last_status=np.zeros(1, np.int64),
+                 has_last=np.zeros(1, bool), offset=np.zeros((1, 3)), offset_vel=np.zeros((1, 3)))
+    out, truth = [], []
+    for f in range(frames):
+        true = VELOCITY * f * dt
+        status = np.array([ESTIMATED if f in lost else LOCATED], np.int64)
+        positions = (true + (BIAS if f in lost else 0.0)).reshape(1, 3).copy()
+        af.blend_transitions(positions, status, np.array([0]), state["last_out"], state["prev_out"],
+                             state["last_status"], state["has_last"], state["offset"], state["offset_vel"], step,
+                             omega, dt)
+        out.append(positions[0].copy())
+        truth.append(true)
+    return np.array(out), np.array(truth)
+
+
+@pytest.mark.parametrize("rate_hz", [60.0, 250.0])
+def test_a_lost_joint_goes_on_where_it_was_heading_then_eases_into_the_estimate_known_answer(rate_hz):
+    loss = int(0.1 * rate_hz)
+    out, truth = run(rate_hz, range(loss, 10_000))
+    error = out - truth
+    # the first lost frame is where the straight line led: the truth itself
+    np.testing.assert_allclose(out[loss], truth[loss], atol=1e-12)
+    # the offset from the estimate dies out as a critically damped spring: o0 (1 + w t) e^(-w t),
+    # halved after the half-life whatever the frame rate
+    omega = af.BLEND_X / HALF_LIFE
+    for f in range(loss, len(out)):
+        t = (f - loss) / rate_hz
+        expected = BIAS * (1 - (1 + omega * t) * math.exp(-omega * t))
+        np.testing.assert_allclose(error[f], expected, atol=1e-12)
+    half = loss + int(round(HALF_LIFE * rate_hz))
+    assert abs(error[half, 1] - BIAS[1] / 2) < 0.002 * rate_hz / 60
+    # nothing twitches: the output's per-frame move never exceeds the line's by more than the spring's
+    extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
+    assert extra.max() < BIAS[1] * omega / math.e / rate_hz + 1e-9
+
+
+def test_returning_markers_are_met_without_a_step_known_answer():
+    rate_hz, loss, back = 100.0, 10, 40
+    out, truth = run(rate_hz, range(loss, back), frames=120)
+    # the frame the markers come back, the output goes on with its own last step
+    np.testing.assert_allclose(out[back] - out[back - 1], out[back - 1] - out[back - 2], atol=1e-12)
+    # then eases into them, and the offset is half gone after the half-life
+    gap_at_return = np.linalg.norm(out[back] - truth[back])
+    assert gap_at_return > 0.01
+    half = back + int(HALF_LIFE * rate_hz)
+    assert np.linalg.norm(out[half] - truth[half]) == pytest.approx(gap_at_return / 2, rel=0.05)
+    assert np.linalg.norm(out[-1] - truth[-1]) < 1e-4  # (after 8 half-lives)
+
+
+def test_a_step_caps_how_fast_the_offset_closes():
+    rate_hz, step = 100.0, 0.002
+    out, truth = run(rate_hz, range(10, 10_000), step=step)
+    extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
+    assert extra.max() <= step + 1e-12
+    spring, _ = run(rate_hz, range(10, 10_000))
+    assert np.abs(spring - truth).max() > 0.01  # (the uncapped spring moves faster than the cap)
+
+
+def test_without_a_half_life_the_loss_jumps_and_the_return_closes_linearly_as_before():
+    out, truth = run(100.0, range(10, 40), half_life=0.0, step=0.01)
+    np.testing.assert_allclose(out[10:40] - truth[10:40], np.tile(BIAS, (30, 1)), atol=1e-12)  # a jump at loss
+    closing = np.linalg.norm(out[40:46] - truth[40:46], axis=1)
+    at_return = np.linalg.norm(BIAS - VELOCITY / 100.0)  # where the estimate was, less the joint's own step
+    np.testing.assert_allclose(closing, np.maximum(at_return - 0.01 * np.arange(1, 7), 0.0), atol=1e-12)
+
+
+def test_the_clock_keeps_the_last_interval_when_stamps_loop_or_are_missing():
+    filler = LimbFiller("left_arm", blend_half_life_s=HALF_LIFE)
+    for t in (0.0, 0.004, 0.008, 0.0, float("nan"), 5.0):  # a looping file, a missing stamp, a pause
+        filler._advance_clock(t)
+    assert filler.frame_s == pytest.approx(0.004)
+
+
+def test_short_gaps_on_a_dancers_elbow():
+    """dance2 of the 28-marker set (no marker on the upper arm: the elbow's swivel is guessed), the left
+    elbow hidden 0.1 s in every 0.5 s, the studio graphs' options with and without the blend. With it, each
+    gap starts from where the markers were heading, so the fill is nearer, and the fill adds little motion
+    of its own where the markers go and come back."""
+    rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance2")
+    prof = load_profile("dance28")
+    pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
+    landmarks = pipe.landmark_map.apply(rec.positions)
+    reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
+    runs = {}
+    for half_life in (0.0, HALF_LIFE):
+        runs[half_life] = gap_run(landmarks, reference, prof, ["elbow_l"], int(rec.rate_hz), rec.n_frames, "ccd",
+                                  True, "markers", fill_options=BEYOND_THESIS | {"blend_half_life_s": half_life},
+                                  short_gaps=(6, 30), rate_hz=rec.rate_hz)
+    mean = {h: float(np.nanmean(r.error_m)) for h, r in runs.items()}
+    moves = {h: transition_moves(r, reference)[0] for h, r in runs.items()}
+    assert len(runs[HALF_LIFE].windows) > 40
+    assert mean[HALF_LIFE] < 0.6 * mean[0.0], mean
+    assert mean[HALF_LIFE] < 0.016, mean
+    for event in ("loss", "return"):
+        assert moves[HALF_LIFE][f"{event}_added_ratio"] < 1.2, moves
+    assert moves[0.0]["loss_added_ratio"] > 2 * moves[HALF_LIFE]["loss_added_ratio"], moves
