@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden results results-blend results-beyond
+.PHONY: demo test setup bench clean golden results results-blend results-beyond results-short
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -57,8 +57,9 @@ results-blend: $(STAMP)
 # The gap-filling options beyond the thesis that the studio graphs use (gapfill.BEYOND_THESIS), as flags of
 # `mocap eval gaps`, with constraints on and the markers removed; a run adds its landmark fills
 # (--rebuild, --pose-memory).
-GAPS_BEYOND := --constraints on --mode markers --swivel --segment-carry --limb-memory --learned-lengths \
+GAPS_BEYOND_NO_BLEND := --constraints on --mode markers --swivel --segment-carry --limb-memory --learned-lengths \
 	--reacquire-step 0.01
+GAPS_BEYOND := $(GAPS_BEYOND_NO_BLEND) --blend-half-life 0.1
 
 results-beyond: $(STAMP)
 	$(BIN)/mocap eval timing --constraints on --beyond --report docs/results/timing_beyond
@@ -99,3 +100,32 @@ results-beyond: $(STAMP)
 			--profile dance28 --remove elbow_$$side --from 1 --solvers ccd $(GAPS_BEYOND) \
 			--report docs/results/elbow_swivel_$${take}_$$side \
 			|| exit 1; done; done
+
+# Short gaps, as a studio's occlusions are (91 % of the Vicon take's real gaps last 0.1 s or less): the joints
+# hidden 0.1 s in every 0.5 s, each case three ways: the thesis's method, the studio graphs' options without the
+# blend at loss, and with it. $(1): take, profile, joints, window; $(2): report name; $(3): the landmark fills.
+, := ,
+SHORT_GAPS := --gap-length 0.1 --gap-every 0.5 --solvers ccd
+DANCE := ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat
+define short_gaps
+	$(BIN)/mocap eval gaps $(SHORT_GAPS) $(1) --constraints on --mode markers --no-plots \
+		--report docs/results/short_$(2)_thesis
+	$(BIN)/mocap eval gaps $(SHORT_GAPS) $(1) $(GAPS_BEYOND_NO_BLEND) $(3) --no-plots --report docs/results/short_$(2)_studio
+	$(BIN)/mocap eval gaps $(SHORT_GAPS) $(1) $(GAPS_BEYOND) $(3) --report docs/results/short_$(2)_blend
+endef
+
+results-short: $(STAMP)
+	$(call short_gaps,--remove elbow_l --from 1,elbow_sprint,--rebuild)
+	$(call short_gaps,--take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 --remove elbow_l --from 1 --to 20,elbow_karate,--rebuild)
+	$(call short_gaps,--take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports --remove knee_l$(,)ankle_l --from 0.3 --gap-every 0.3,knee_ankle_walk,--rebuild)
+	$(call short_gaps,--take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d --profile vicon53 --remove elbow_r --from 1,elbow_vicon,--rebuild)
+	$(call short_gaps,--take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d --profile vicon53 --remove knee_r$(,)ankle_r --from 1,knee_ankle_vicon,--rebuild)
+	$(call short_gaps,--take $(DANCE):dance2 --profile dance28 --remove knee_l$(,)ankle_l --from 1,knee_ankle_dance2,--pose-memory)
+	for take in dance1 dance2 walk1 walk2; do for side in l r; do \
+		$(BIN)/mocap eval gaps $(SHORT_GAPS) --take $(DANCE):$$take --profile dance28 --remove elbow_$$side --from 1 \
+			--constraints on --mode markers --no-plots --report docs/results/short_elbow_$${take}_$${side}_thesis || exit 1; \
+		$(BIN)/mocap eval gaps $(SHORT_GAPS) --take $(DANCE):$$take --profile dance28 --remove elbow_$$side --from 1 \
+			$(GAPS_BEYOND_NO_BLEND) --no-plots --report docs/results/short_elbow_$${take}_$${side}_studio || exit 1; \
+		$(BIN)/mocap eval gaps $(SHORT_GAPS) --take $(DANCE):$$take --profile dance28 --remove elbow_$$side --from 1 \
+			$(GAPS_BEYOND) --no-plots --report docs/results/short_elbow_$${take}_$${side}_blend || exit 1; done; done
+

@@ -39,6 +39,9 @@ FIT_STEPS = 360     # a coarse pass over the whole circle (1 degree), then a fin
 MEMORY_SD = 0.01
 # A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.
 BLEND_X = 1.6783469900166612
+# Faster than this, an estimate has jumped to another source (no joint moves so fast: the karate kata's strikes
+# take the wrist to 4-7 m/s); the Vicon take's held left wrist jumped 147 and 286 mm in a frame (18-34 m/s).
+SOURCE_JUMP_M_S = 10.0
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 
 
@@ -296,8 +299,8 @@ def carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames):
 
 
 @njit(cache=True)
-def blend_transitions(positions, status, idx, last_out, prev_out, last_status, has_last, offset, offset_vel, step,
-                      omega, dt):
+def blend_transitions(positions, status, idx, last_out, prev_out, last_raw, last_status, has_last, offset, offset_vel,
+                      step, omega, dt):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -306,7 +309,9 @@ def blend_transitions(positions, status, idx, last_out, prev_out, last_status, h
     where it was heading (its last position plus its last step) and the offset from there to the new
     source dies out as a critically damped spring (Holden's, exact for any ``dt``), by at most ``step``
     a frame when that is set. At loss the offset is the truth the estimate has not got: over a short
-    gap it keeps the joint near its markers' last course."""
+    gap it keeps the joint near its markers' last course. An estimate that moves faster than
+    SOURCE_JUMP_M_S has changed source without a change of status (a held hand carried by another
+    bone), and is met the same way. ``last_raw``: each joint's position before the blend."""
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
     for k in range(n):
@@ -317,7 +322,8 @@ def blend_transitions(positions, status, idx, last_out, prev_out, last_status, h
             offset_vel[k] = 0.0
         elif omega > 0:
             was = last_status[k]
-            if s != was and was != MISSING and all_finite(last_out[k]):
+            jumped = s != LOCATED and s == was and vnorm(positions[j] - last_raw[k]) > SOURCE_JUMP_M_S * dt
+            if (s != was or jumped) and was != MISSING and all_finite(last_out[k]):
                 heading = 2 * last_out[k] - prev_out[k] if all_finite(prev_out[k]) else last_out[k]
                 offset[k] = heading - positions[j]
                 offset_vel[k] = 0.0
@@ -329,6 +335,7 @@ def blend_transitions(positions, status, idx, last_out, prev_out, last_status, h
                 moved = vnorm(offset[k] - before)
                 if step > 0 and moved > step:
                     offset[k] = before + (offset[k] - before) * (step / moved)
+            last_raw[k] = positions[j]
             positions[j] += offset[k]
         else:
             if s == LOCATED and (last_status[k] == ESTIMATED or last_status[k] == HELD) and all_finite(last_out[k]):
