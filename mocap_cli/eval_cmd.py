@@ -11,8 +11,8 @@ from typing import get_args
 from tqdm import tqdm
 
 from mocap_cli.measure import LAYOUTS
-from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, gap_windows, localize_take, transition_moves,
-                                    worst_case_timing)
+from mocap_core.experiments import (THESIS_TIMING_MS, gap_run, gap_windows, localize_take, real_gap_moves,
+                                    transition_moves, worst_case_timing)
 from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
 from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
@@ -80,6 +80,20 @@ def add_parser(sub) -> None:
     g.add_argument("--gap-every", type=float, default=0.5, metavar="S",
                    help="with --gap-length: seconds from one gap's start to the next's (default 0.5)")
     g.set_defaults(func=run_gaps)
+
+    rg = esub.add_parser("real-gaps", help="smoothness of the fill on a take's own gaps (no truth needed)",
+                         description="Solve a take with its own gaps three ways (the thesis's method, the studio "
+                                     "graphs' options without the blend, and with it) and report how the filled "
+                                     "joints move where their status changes (markers lost or found, a fill handed "
+                                     "to another) and on every move into or out of a filled frame, next to each "
+                                     "joint's normal per-frame motion (95th percentile of its located moves).")
+    rg.add_argument("--take", default=str(REPO.parent / "shared" / "data" /
+                                          "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"),
+                    help="recording with gaps (default: the Vicon free-form take, 6.6%% of its markers missing)")
+    rg.add_argument("--profile", default="vicon53")
+    rg.add_argument("--report", default="reports/real_gaps", help="directory for real_gaps.md, .csv and the plot")
+    rg.add_argument("--no-plots", action="store_true")
+    rg.set_defaults(func=run_real_gaps)
 
     lt = esub.add_parser("latency", help="end-to-end latency of the full graph fed by the QTM emulator",
                          description="Starts the QTM emulator and the full graph (qtm_ingest to retarget), logs "
@@ -225,6 +239,59 @@ def run_gaps(args) -> int:
                            f"{joints[0]} hidden ({mode}), constraints {'on' if constrained else 'off'}")
                 trajectory_plot(sel, reference, start, stop, out / f"trajectory_{tag}.png",
                                 f"{joints[0]} ({mode}), constraints {'on' if constrained else 'off'}")
+    log.info("wrote %s", out)
+    return 0
+
+
+def run_real_gaps(args) -> int:
+    from mocap_core.pipeline import SkeletonPipeline
+    from mocap_core.skeleton import Status
+
+    import numpy as np
+
+    rec = read_recording(args.take)
+    profile = load_profile(args.profile)
+    variants = {"thesis's method": (False, None),
+                "studio options without the blend": (True, BEYOND_THESIS | {"blend_half_life_s": 0.0}),
+                "studio options": (True, BEYOND_THESIS)}
+    warm_up()
+    results = {}
+    for name, (beyond, options) in tqdm(variants.items(), desc="solving", unit="variant"):
+        pipe = SkeletonPipeline(profile, rec.labels, beyond=beyond, rate_hz=rec.rate_hz, fill_options=options)
+        chunks = list(pipe.run(rec.positions))
+        status = np.concatenate([c.status for c in chunks])
+        results[name] = real_gap_moves(np.concatenate([c.positions for c in chunks]), status)
+    missing = float(np.mean(~np.isfinite(rec.positions).all(axis=2)))
+    filled = float(np.mean(np.isin(status, (Status.ESTIMATED, Status.HELD))))
+    md = [f"{rec.source.split('/')[-1]} ({rec.n_frames} frames at {rec.rate_hz:g} Hz, {missing:.1%} of its markers "
+          f"missing; with the studio options {filled:.1%} of the joints are filled). Moves of the filled joints, each "
+          "over its normal per-frame motion (95th percentile of its moves between located frames): at a change of "
+          "status (lost, found, or handed from one fill to another), and on every move into or out of a filled "
+          "frame. The actor's own fast moves are in both: a joint moves faster than its 95th percentile in 5 % of "
+          "frames.", "",
+          "| fill | changes of status | over 1.5x | largest | moves of filled joints | over 1.5x | over 3x | largest "
+          "| worst changes (joint, frame) |", "|---|---|---|---|---|---|---|---|---|"]
+    rows = []
+    for name, r in results.items():
+        row = r.row()
+        rows.append({"fill": name, **row})
+        worst = ", ".join(f"{joint} {frame}: {x:.1f}x" for x, joint, frame in r.worst[:3])
+        md.append(f"| {name} | {row['changes']} | {row['changes_over_1_5']} | {row['changes_max']:.2f}x | "
+                  f"{row['filled_moves']} | {row['filled_over_1_5']} | {row['filled_over_3']} | "
+                  f"{row['filled_max']:.2f}x | {worst} |")
+    out = Path(args.report)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "real_gaps.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    (out / "real_gaps.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
+    if not args.no_plots:
+        from mocap_cli.plots import move_ratio_plot
+
+        move_ratio_plot({name: r.changes for name, r in results.items()}, out / "moves_at_changes.png",
+                        f"moves where a joint's status changes: {rec.source.split('/')[-1][:40]}")
     log.info("wrote %s", out)
     return 0
 

@@ -48,3 +48,23 @@ def trajectory_plot(runs, reference: np.ndarray, start: int, stop: int, path: Pa
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def move_ratio_plot(ratios: dict[str, np.ndarray], path: Path, title: str) -> None:
+    """How many moves exceed each multiple of the normal per-frame motion, one line per fill."""
+    fig, ax = plt.subplots(figsize=(8, 3.6), dpi=110)
+    for name, r in ratios.items():
+        x = np.sort(r)[::-1]
+        ax.step(x, np.arange(1, len(x) + 1), where="post", label=name, lw=1.4)
+    ax.axvline(1.5, color="grey", ls="--", lw=1, label="1.5x (issue 9's bound)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("move / normal per-frame motion")
+    ax.set_ylabel("moves at least this large")
+    ax.set_title(title)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+

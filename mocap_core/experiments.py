@@ -212,3 +212,49 @@ def transition_moves(run: GapRun, reference: np.ndarray, window: int = 3) -> lis
                     f"{event}_added_ratio": add / normal if normal > 0 else float("nan")}
         out.append(row)
     return out
+
+
+# -- smoothness on a take's own gaps (no truth needed) -----------------------------------------------------
+@dataclass
+class RealGapMoves:
+    """How the filled joints of a solved take move, next to each joint's normal per-frame motion (the 95th
+    percentile of its moves between two located frames): at every change of status between two frames
+    where it has a position (a joint lost, found, or handed from one fill to another), and on every move
+    into or out of a filled (estimated or held) frame."""
+    changes: np.ndarray     # move / normal at each change of status
+    filled: np.ndarray      # move / normal on each move into or out of a filled frame
+    worst: list[tuple[float, str, int]]  # (move / normal, joint, frame) of the largest moves at a change
+
+    def row(self) -> dict:
+        def over(a, x):
+            return int((a > x).sum())
+        return {"changes": len(self.changes), "changes_over_1_5": over(self.changes, 1.5),
+                "changes_max": float(self.changes.max()) if len(self.changes) else float("nan"),
+                "filled_moves": len(self.filled), "filled_over_1_5": over(self.filled, 1.5),
+                "filled_over_3": over(self.filled, 3.0),
+                "filled_max": float(self.filled.max()) if len(self.filled) else float("nan")}
+
+
+def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int = 100) -> RealGapMoves:
+    """``positions`` (F, joints, 3), ``status`` (F, joints) of a solved take. Joints located in fewer than
+    ``min_located`` frames have no normal motion to compare with and are left out."""
+    changes, filled, worst = [], [], []
+    filled_status = (int(Status.ESTIMATED), int(Status.HELD))
+    for j, joint in enumerate(JOINTS):
+        step = np.linalg.norm(np.diff(positions[:, j], axis=0), axis=-1)
+        located = status[:, j] == Status.LOCATED
+        both = located[1:] & located[:-1]
+        if both.sum() < min_located:
+            continue
+        normal = float(np.nanpercentile(step[both], 95))
+        if not normal > 0:
+            continue
+        seen = status[:, j] != Status.MISSING
+        change = (status[1:, j] != status[:-1, j]) & seen[1:] & seen[:-1]
+        near_fill = np.isin(status[1:, j], filled_status) | np.isin(status[:-1, j], filled_status)
+        changes.append(step[change] / normal)
+        filled.append(step[near_fill & seen[1:] & seen[:-1]] / normal)
+        worst += [(float(step[f] / normal), joint, int(f + 1)) for f in np.flatnonzero(change)]
+    worst.sort(reverse=True)
+    return RealGapMoves(np.concatenate(changes) if changes else np.zeros(0),
+                        np.concatenate(filled) if filled else np.zeros(0), worst[:5])

@@ -3,6 +3,10 @@ import csv
 import subprocess
 import sys
 
+import numpy as np
+
+from mocap_core.experiments import real_gap_moves
+from mocap_core.skeleton import INDEX, N_JOINTS, Status
 from tests.conftest import REPO, data_file
 
 
@@ -23,7 +27,7 @@ def test_eval_gaps_writes_table_csv_and_plots(tmp_path):
         assert 0 <= float(x["min"]) <= float(x["mean"]) <= float(x["max"]) < 1.0  # a leg length
         assert int(x["missing"]) == 0
     md = (tmp_path / "gaps.md").read_text()
-    assert "Re-acquisition" in md and "| markers | ccd | on | knee_l |" in md
+    assert "Loss and re-acquisition" in md and "| markers | ccd | on | knee_l |" in md
     for name in ("error_markers_constrained.png", "trajectory_joint_constrained.png"):
         assert (tmp_path / name).stat().st_size > 10_000
 
@@ -36,3 +40,56 @@ def test_eval_timing_reports_every_requested_solver(tmp_path):
     assert [x["solver"] for x in rows] == ["ccd", "dls"]
     for x in rows:
         assert int(x["frames"]) == 3 * 339 and 0 < float(x["min_ms"]) <= float(x["mean_ms"]) <= float(x["max_ms"])
+
+
+def test_eval_gaps_with_short_gaps(tmp_path):
+    """--gap-length/--gap-every: many short gaps instead of one; every gap's loss and return is measured."""
+    r = mocap("eval", "gaps", "--take", str(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d")), "--profile",
+              "qualisys_sports", "--remove", "elbow_l", "--from", "0.3", "--gap-length", "0.05", "--gap-every", "0.2",
+              "--solvers", "ccd", "--constraints", "on", "--mode", "markers", "--swivel", "--blend-half-life", "0.1",
+              "--report", str(tmp_path), "--no-plots")
+    assert r.returncode == 0, r.stderr
+    md = (tmp_path / "gaps.md").read_text()
+    assert "hidden 0.05 s (10 frames) in every 0.2 s from 0.30 s to 1.70 s (7 gaps, 70 frames)" in md
+    assert "--blend-half-life 0.1" in md
+    row = next(line for line in md.splitlines() if line.startswith("| markers | ccd | on | elbow_l | ") and "." in line
+               and line.count("|") == 12)
+    cells = [float(c) for c in row.split("|")[5:-1]]
+    assert all(np.isfinite(cells)) and cells[0] > 0      # normal step, then loss and return moves
+    bad = mocap("eval", "gaps", "--take", str(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d")), "--profile",
+                "qualisys_sports", "--gap-length", "0.3", "--gap-every", "0.2", "--report", str(tmp_path))
+    assert bad.returncode != 0 and "no more than the spacing" in bad.stderr
+
+
+def test_real_gap_moves_known_answer():
+    """A joint located for 200 frames at 1 mm a frame, then estimated 10 mm off: one change of status, a
+    move 11x its normal one; the frames it is filled move normally."""
+    frames = 400
+    positions = np.zeros((frames, N_JOINTS, 3))
+    status = np.full((frames, N_JOINTS), int(Status.MISSING))
+    k = INDEX["elbow_l"]
+    positions[:, k, 0] = 0.001 * np.arange(frames)
+    status[:, k] = Status.LOCATED
+    positions[200:, k, 1] = 0.010
+    status[200:, k] = Status.ESTIMATED
+    moves = real_gap_moves(positions, status)
+    assert len(moves.changes) == 1 and abs(moves.changes[0] - np.hypot(1, 10)) < 1e-6
+    assert moves.worst[0][1:] == ("elbow_l", 200)
+    assert len(moves.filled) == 200 and np.sum(moves.filled > 1.5) == 1
+
+
+def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
+    """The Vicon take's own gaps (6.6 % of its markers), no truth: the blend leaves fewer and smaller
+    moves where a joint's status changes than the same options without it, and the thesis's method."""
+    r = mocap("eval", "real-gaps", "--take", str(data_file("12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d")),
+              "--profile", "vicon53", "--report", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    rows = {x["fill"]: x for x in csv.DictReader(open(tmp_path / "real_gaps.csv"))}
+    assert list(rows) == ["thesis's method", "studio options without the blend", "studio options"]
+    blend, without, thesis = rows["studio options"], rows["studio options without the blend"], rows["thesis's method"]
+    assert int(blend["changes"]) > 500
+    assert int(blend["changes_over_1_5"]) * 5 < int(without["changes_over_1_5"]) < int(thesis["changes_over_1_5"])
+    assert float(blend["changes_max"]) < 3 < float(without["changes_max"])
+    assert int(blend["filled_over_3"]) < int(without["filled_over_3"])
+    assert (tmp_path / "moves_at_changes.png").stat().st_size > 10_000
+
