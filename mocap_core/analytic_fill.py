@@ -42,6 +42,8 @@ BLEND_X = 1.6783469900166612
 # Faster than this, an estimate has jumped to another source (no joint moves so fast: the karate kata's strikes
 # take the wrist to 4-7 m/s); the Vicon take's held left wrist jumped 147 and 286 mm in a frame (18-34 m/s).
 SOURCE_JUMP_M_S = 10.0
+# A source seen again within this many frames (a flickering marker) gets its step from its last sighting.
+FLICKER_FRAMES = 5
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 
 
@@ -299,19 +301,31 @@ def carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames):
 
 
 @njit(cache=True)
-def blend_transitions(positions, status, idx, last_out, prev_out, last_raw, last_status, has_last, offset, offset_vel,
-                      step, omega, dt):
+def _take_step(velocity, step, limit):
+    """A source's step becomes its velocity unless it is faster than any joint moves (a jump, or two
+    fills of one kind that are not one source), in place."""
+    if vnorm(step) <= limit:
+        velocity[:] = step
+
+
+@njit(cache=True)
+def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last,
+                      offset, offset_vel, step, omega, dt):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
     had it and close the gap by at most ``step`` metres a frame (a rate-limited decaying offset).
-    With ``omega`` > 0 (blend_half_life_s): at every change of status, lost or found, the output goes on
-    where it was heading (its last position plus its last step) and the offset from there to the new
-    source dies out as a critically damped spring (Holden's, exact for any ``dt``), by at most ``step``
-    a frame when that is set. At loss the offset is the truth the estimate has not got: over a short
-    gap it keeps the joint near its markers' last course. An estimate that moves faster than
-    SOURCE_JUMP_M_S has changed source without a change of status (a held hand carried by another
-    bone), and is met the same way. ``last_raw``: each joint's position before the blend."""
+    With ``omega`` > 0 (blend_half_life_s): the output is the source (markers, or a fill's estimate) plus
+    an offset. Where the markers are lost or come back, the offset takes in the jump: the new source
+    less where the old one was heading (its last position plus its own last step), so the output goes on
+    as it went. The offset then dies out as a critically damped spring (Holden's, exact for any ``dt``),
+    by at most ``step`` a frame when that is set. At loss the offset is the truth the estimate has not
+    got: over a short gap it keeps the joint near its markers' last course. An estimate that leaves its
+    course faster than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met
+    the same way; one handed between fills (estimated, held) without such a jump is not. A flickering
+    marker swings the offset back and forth by the two sources' difference: nothing builds up.
+    State per joint: ``last_raw`` and ``raw_vel``, the source's last position and step; ``seen_raw`` and
+    ``seen_age``, the last position of each kind of source (0 markers, 1 a fill) and frames since."""
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
     for k in range(n):
@@ -320,14 +334,24 @@ def blend_transitions(positions, status, idx, last_out, prev_out, last_raw, last
         if not has_last[0] or s == MISSING or not all_finite(positions[j]):
             offset[k] = 0.0
             offset_vel[k] = 0.0
+            if s == MISSING:
+                raw_vel[k] = 0.0
         elif omega > 0:
             was = last_status[k]
-            jumped = s != LOCATED and s == was and vnorm(positions[j] - last_raw[k]) > SOURCE_JUMP_M_S * dt
-            if (s != was or jumped) and was != MISSING and all_finite(last_out[k]):
-                heading = 2 * last_out[k] - prev_out[k] if all_finite(prev_out[k]) else last_out[k]
-                offset[k] = heading - positions[j]
-                offset_vel[k] = 0.0
+            kind = 0 if s == LOCATED else 1
+            raw = positions[j].copy()
+            course = last_raw[k] + raw_vel[k]
+            found_or_lost = (s == LOCATED) != (was == LOCATED)
+            jumped = s != LOCATED and was != LOCATED and vnorm(raw - course) > SOURCE_JUMP_M_S * dt
+            if was != MISSING and (found_or_lost or jumped):
+                offset[k] -= raw - course
+                offset_vel[k] = 0.0  # a new offset, eased from rest
+                since = seen_age[k, kind] + 1  # frames since this kind of source was last seen
+                if found_or_lost and since <= FLICKER_FRAMES:
+                    _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, SOURCE_JUMP_M_S * dt)
             else:
+                if was != MISSING:
+                    _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)
                 before = offset[k].copy()
                 spring = offset_vel[k] + omega * before
                 offset[k] = decay * (before + spring * dt)
@@ -335,7 +359,11 @@ def blend_transitions(positions, status, idx, last_out, prev_out, last_raw, last
                 moved = vnorm(offset[k] - before)
                 if step > 0 and moved > step:
                     offset[k] = before + (offset[k] - before) * (step / moved)
-            last_raw[k] = positions[j]
+            last_raw[k] = raw
+            seen_raw[k, kind] = raw
+            seen_age[k, 0] += 1
+            seen_age[k, 1] += 1
+            seen_age[k, kind] = 0
             positions[j] += offset[k]
         else:
             if s == LOCATED and (last_status[k] == ESTIMATED or last_status[k] == HELD) and all_finite(last_out[k]):
@@ -347,7 +375,6 @@ def blend_transitions(positions, status, idx, last_out, prev_out, last_raw, last
                 offset[k] *= min(1.0, max(0.0, (size - step) / size))
                 positions[j] += offset[k]
     for k in range(n):
-        prev_out[k] = last_out[k]
         last_out[k] = positions[idx[k]]
         last_status[k] = status[idx[k]]
     has_last[0] = True

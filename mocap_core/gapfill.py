@@ -133,8 +133,10 @@ class LimbFiller:
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
         self.blend_offset, self.blend_velocity = np.zeros((n, 3)), np.zeros((n, 3))
-        self.last_out, self.prev_out, self.last_raw = np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3))
-        self.last_status = np.zeros(n, np.int64)
+        self.last_out, self.last_status = np.zeros((n, 3)), np.zeros(n, np.int64)
+        # the sources' course, for the blend: last position and step, and where each kind was last seen
+        self.last_raw, self.raw_vel = np.zeros((n, 3)), np.zeros((n, 3))
+        self.seen_raw, self.seen_age = np.zeros((n, 2, 3)), np.full((n, 2), 1 << 30, np.int64)
         self.has_last = np.zeros(1, bool)
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
@@ -169,8 +171,9 @@ class LimbFiller:
                    self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
                    p.escape_max_deg, out)
         if self.reacquire_step_m > 0 or self.blend_omega > 0:
-            af.blend_transitions(positions, status, idx, self.last_out, self.prev_out, self.last_raw, self.last_status,
-                                 self.has_last, self.blend_offset, self.blend_velocity, self.reacquire_step_m,
+            af.blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
+                                 self.seen_age, self.last_status, self.has_last, self.blend_offset,
+                                 self.blend_velocity, self.reacquire_step_m,
                                  self.blend_omega, self.frame_s)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
