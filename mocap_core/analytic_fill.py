@@ -331,13 +331,14 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
     for k in range(n):
         j = idx[k]
         s = status[j]
-        if not has_last[0] or s == MISSING or not all_finite(positions[j]):
+        seen_age[k, 0] += 1
+        seen_age[k, 1] += 1
+        if s == MISSING or not all_finite(positions[j]) or (omega == 0 and not has_last[0]):
             offset[k] = 0.0
             offset_vel[k] = 0.0
-            if s == MISSING:
-                raw_vel[k] = 0.0
+            raw_vel[k] = 0.0
         elif omega > 0:
-            was = last_status[k]
+            was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
             kind = 0 if s == LOCATED else 1
             raw = positions[j].copy()
             course = last_raw[k] + raw_vel[k]
@@ -346,7 +347,7 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
             if was != MISSING and (found_or_lost or jumped):
                 offset[k] -= raw - course
                 offset_vel[k] = 0.0  # a new offset, eased from rest
-                since = seen_age[k, kind] + 1  # frames since this kind of source was last seen
+                since = seen_age[k, kind]  # frames since this kind of source was last seen
                 if found_or_lost and since <= FLICKER_FRAMES:
                     _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, SOURCE_JUMP_M_S * dt)
             else:
@@ -361,8 +362,6 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
                     offset[k] = before + (offset[k] - before) * (step / moved)
             last_raw[k] = raw
             seen_raw[k, kind] = raw
-            seen_age[k, 0] += 1
-            seen_age[k, 1] += 1
             seen_age[k, kind] = 0
             positions[j] += offset[k]
         else:

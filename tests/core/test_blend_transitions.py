@@ -17,6 +17,7 @@ LOCATED, ESTIMATED = int(Status.LOCATED), int(Status.ESTIMATED)
 VELOCITY = np.array([0.5, 0.0, 0.0])   # m/s, the joint's true motion: a straight line
 BIAS = np.array([0.0, 0.05, 0.0])      # the estimate is 50 mm off the truth while the markers are lost
 HALF_LIFE = 0.1
+START = np.array([1.0, 2.0, 0.5])     # where the line starts (not the origin)
 
 
 def run(rate_hz: float, lost: range, half_life: float = HALF_LIFE, step: float = 0.0, frames: int = 80,
@@ -31,7 +32,7 @@ def run(rate_hz: float, lost: range, half_life: float = HALF_LIFE, step: float =
                  has_last=np.zeros(1, bool), offset=np.zeros((1, 3)), offset_vel=np.zeros((1, 3)))
     out, truth = [], []
     for f in range(frames):
-        true = velocity * f * dt
+        true = START + velocity * f * dt
         status = np.array([ESTIMATED if f in lost else LOCATED], np.int64)
         positions = (true + (bias(f) if f in lost else 0.0)).reshape(1, 3).copy()
         af.blend_transitions(positions, status, np.array([0]), state["last_out"], state["last_raw"], state["raw_vel"],
@@ -119,6 +120,14 @@ def test_a_flickering_marker_does_not_send_the_joint_coasting_off():
     error = np.linalg.norm(out - truth, axis=1)
     assert error[20:60].max() < np.linalg.norm(BIAS), error[20:60].max()
     assert error[-1] < 1e-3
+
+
+def test_a_joint_lost_right_after_the_first_frame_stays_where_it_was():
+    """The first frame a filler sees is where every course starts (not the origin): a joint lost in the
+    second frame, as the worst-case timing loses every joint, stays within one step of its truth."""
+    rate_hz = 100.0
+    out, truth = run(rate_hz, range(1, 10_000), frames=5)
+    assert np.linalg.norm(out[1] - truth[1]) <= np.linalg.norm(VELOCITY) / rate_hz + 1e-12
 
 
 def test_without_a_half_life_the_loss_jumps_and_the_return_closes_linearly_as_before():
