@@ -103,7 +103,8 @@ results-beyond: $(STAMP)
 
 # Short gaps, as a studio's occlusions are (91 % of the Vicon take's real gaps last 0.1 s or less): the joints
 # hidden 0.1 s in every 0.5 s, each case three ways: the thesis's method, the studio graphs' options without the
-# blend at loss, and with it. $(1): take, profile, joints, window; $(2): report name; $(3): the landmark fills.
+# blend at loss, and with it. $(1): take, profile, joints, window; $(2): report name; $(3): the landmark fills
+# ($(,) is a comma inside a call's argument).
 , := ,
 SHORT_GAPS := --gap-length 0.1 --gap-every 0.5 --solvers ccd
 DANCE := ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat

@@ -309,6 +309,50 @@ def _take_step(velocity, step, limit):
 
 
 @njit(cache=True)
+def _spring_blend(p, s, was, k, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel, step, omega, dt, decay):
+    """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place."""
+    kind = 0 if s == LOCATED else 1
+    raw = p.copy()
+    course = last_raw[k] + raw_vel[k]
+    found_or_lost = (s == LOCATED) != (was == LOCATED)
+    jumped = s != LOCATED and was != LOCATED and vnorm(raw - course) > SOURCE_JUMP_M_S * dt
+    if was != MISSING and (found_or_lost or jumped):
+        offset[k] -= raw - course
+        offset_vel[k] = 0.0  # a new offset, eased from rest
+        since = seen_age[k, kind]  # frames since this kind of source was last seen
+        if found_or_lost and since <= FLICKER_FRAMES:
+            _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, SOURCE_JUMP_M_S * dt)
+    else:
+        if was != MISSING:
+            _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)
+        before = offset[k].copy()
+        spring = offset_vel[k] + omega * before
+        offset[k] = decay * (before + spring * dt)
+        offset_vel[k] = decay * (offset_vel[k] - spring * omega * dt)
+        moved = vnorm(offset[k] - before)
+        if step > 0 and moved > step:
+            offset[k] = before + (offset[k] - before) * (step / moved)
+    last_raw[k] = raw
+    seen_raw[k, kind] = raw
+    seen_age[k, kind] = 0
+    p += offset[k]
+
+
+@njit(cache=True)
+def _linear_return(p, s, was, last, offset, step):
+    """reacquire_step_m alone: returning markers are met from where the estimate ``last`` was, the gap
+    closed by at most ``step`` a frame; a joint that is not located has no offset."""
+    if s == LOCATED and (was == ESTIMATED or was == HELD) and all_finite(last):
+        offset[:] = last - p
+    if s != LOCATED:
+        offset[:] = 0.0
+    size = vnorm(offset)
+    if size > 0:
+        offset *= min(1.0, max(0.0, (size - step) / size))
+        p += offset
+
+
+@njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last,
                       offset, offset_vel, step, omega, dt):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
@@ -339,40 +383,10 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
             raw_vel[k] = 0.0
         elif omega > 0:
             was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
-            kind = 0 if s == LOCATED else 1
-            raw = positions[j].copy()
-            course = last_raw[k] + raw_vel[k]
-            found_or_lost = (s == LOCATED) != (was == LOCATED)
-            jumped = s != LOCATED and was != LOCATED and vnorm(raw - course) > SOURCE_JUMP_M_S * dt
-            if was != MISSING and (found_or_lost or jumped):
-                offset[k] -= raw - course
-                offset_vel[k] = 0.0  # a new offset, eased from rest
-                since = seen_age[k, kind]  # frames since this kind of source was last seen
-                if found_or_lost and since <= FLICKER_FRAMES:
-                    _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, SOURCE_JUMP_M_S * dt)
-            else:
-                if was != MISSING:
-                    _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)
-                before = offset[k].copy()
-                spring = offset_vel[k] + omega * before
-                offset[k] = decay * (before + spring * dt)
-                offset_vel[k] = decay * (offset_vel[k] - spring * omega * dt)
-                moved = vnorm(offset[k] - before)
-                if step > 0 and moved > step:
-                    offset[k] = before + (offset[k] - before) * (step / moved)
-            last_raw[k] = raw
-            seen_raw[k, kind] = raw
-            seen_age[k, kind] = 0
-            positions[j] += offset[k]
+            _spring_blend(positions[j], s, was, k, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel, step,
+                          omega, dt, decay)
         else:
-            if s == LOCATED and (last_status[k] == ESTIMATED or last_status[k] == HELD) and all_finite(last_out[k]):
-                offset[k] = last_out[k] - positions[j]
-            if s != LOCATED:
-                offset[k] = 0.0
-            size = vnorm(offset[k])
-            if size > 0:
-                offset[k] *= min(1.0, max(0.0, (size - step) / size))
-                positions[j] += offset[k]
+            _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):
         last_out[k] = positions[idx[k]]
         last_status[k] = status[idx[k]]
