@@ -272,13 +272,21 @@ def run_real_gaps(args) -> int:
           "| fill | changes of status | over 1.5x | largest | moves of filled joints | over 1.5x | over 3x | largest "
           "| worst changes (joint, frame) |", "|---|---|---|---|---|---|---|---|---|"]
     rows = []
+
+    def ratio(x: float) -> str:
+        return f"{x:.2f}x" if np.isfinite(x) else "-"
+
     for name, r in results.items():
         row = r.row()
         rows.append({"fill": name, **row})
         worst = ", ".join(f"{joint} {frame}: {x:.1f}x" for x, joint, frame in r.worst[:3])
-        md.append(f"| {name} | {row['changes']} | {row['changes_over_1_5']} | {row['changes_max']:.2f}x | "
+        md.append(f"| {name} | {row['changes']} | {row['changes_over_1_5']} | {ratio(row['changes_max'])} | "
                   f"{row['filled_moves']} | {row['filled_over_1_5']} | {row['filled_over_3']} | "
-                  f"{row['filled_max']:.2f}x | {worst} |")
+                  f"{ratio(row['filled_max'])} | {worst} |")
+    if not any(len(r.filled) for r in results.values()):
+        md += ["", "No joint was filled in any frame: the take has no gaps to measure (mocap eval gaps hides some)."]
+        log.warning("%s: no joint was filled in any frame, nothing to measure; mocap eval gaps makes gaps to fill",
+                    args.take)
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "real_gaps.csv", "w", newline="") as f:
@@ -287,7 +295,7 @@ def run_real_gaps(args) -> int:
         w.writerows(rows)
     (out / "real_gaps.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
-    if not args.no_plots:
+    if not args.no_plots and any(len(r.changes) for r in results.values()):
         from mocap_cli.plots import move_ratio_plot
 
         move_ratio_plot({name: r.changes for name, r in results.items()}, out / "moves_at_changes.png",

@@ -93,3 +93,12 @@ def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
     assert int(blend["filled_over_3"]) < int(without["filled_over_3"])
     assert (tmp_path / "moves_at_changes.png").stat().st_size > 10_000
 
+
+def test_eval_real_gaps_on_a_take_without_gaps_says_so(tmp_path):
+    r = mocap("eval", "real-gaps", "--take", str(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d")), "--profile",
+              "qualisys_sports", "--report", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert "no gaps to measure" in (tmp_path / "real_gaps.md").read_text()
+    assert "nothing to measure" in r.stderr
+    assert not (tmp_path / "moves_at_changes.png").exists()
+
