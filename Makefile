@@ -128,6 +128,6 @@ results-short: $(STAMP)
 		$(BIN)/mocap eval gaps $(SHORT_GAPS) --take $(DANCE):$$take --profile dance28 --remove elbow_$$side --from 1 \
 			$(GAPS_BEYOND_NO_BLEND) --no-plots --report docs/results/short_elbow_$${take}_$${side}_studio || exit 1; \
 		$(BIN)/mocap eval gaps $(SHORT_GAPS) --take $(DANCE):$$take --profile dance28 --remove elbow_$$side --from 1 \
-			$(GAPS_BEYOND) --no-plots --report docs/results/short_elbow_$${take}_$${side}_blend || exit 1; done; done
+			$(GAPS_BEYOND) --report docs/results/short_elbow_$${take}_$${side}_blend || exit 1; done; done
 	$(BIN)/mocap eval real-gaps --report docs/results/real_gaps_vicon
 
