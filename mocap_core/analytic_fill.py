@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -44,6 +45,8 @@ BLEND_X = 1.6783469900166612
 SOURCE_JUMP_M_S = 10.0
 # A source seen again within this many frames (a flickering marker) gets its step from its last sighting.
 FLICKER_FRAMES = 5
+# Seconds between frames when the caller gives no capture times (the blend's spring needs them).
+DEFAULT_FRAME_S = 0.01
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 
 
@@ -298,6 +301,41 @@ def carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames):
         if not all_finite(frames[idx[m]]):
             frames[idx[m]] = mm(turn, prev_frames[m])
     return n - j
+
+
+@dataclass
+class BlendState:
+    """What blend_transitions keeps per joint of a limb between frames, and the limb's frame clock."""
+    last_out: np.ndarray      # (n, 3) the last output
+    last_raw: np.ndarray      # (n, 3) the source's last position, before the offset
+    raw_vel: np.ndarray       # (n, 3) and its last step
+    seen_raw: np.ndarray      # (n, 2, 3) where each kind of source (0 markers, 1 a fill) was last seen
+    seen_age: np.ndarray      # (n, 2) and how many frames ago
+    last_status: np.ndarray   # (n,)
+    has_last: np.ndarray      # (1,) bool
+    offset: np.ndarray        # (n, 3) the spring's offset
+    offset_vel: np.ndarray    # (n, 3) and its velocity
+    frame_s: float = DEFAULT_FRAME_S
+    last_time_s: float = float("nan")
+
+    @classmethod
+    def empty(cls, n: int) -> "BlendState":
+        return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
+                   np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
+                   np.zeros((n, 3)))
+
+    def advance_clock(self, time_s: float) -> None:
+        """The time since the last frame; a missing, repeated or backward stamp (a looping file, a
+        restarted QTM) or one over a second keeps the last good interval."""
+        step = time_s - self.last_time_s
+        if 0 < step <= 1.0:
+            self.frame_s = step
+        self.last_time_s = time_s
+
+    def blend(self, positions, status, idx, step: float, omega: float) -> None:
+        blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
+                          self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, step, omega,
+                          self.frame_s)
 
 
 @njit(cache=True)

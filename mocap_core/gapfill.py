@@ -64,8 +64,6 @@ BEYOND_THESIS_HELP = {
                          "was heading and let the offset to the new source die out as a critically damped spring "
                          "that halves it in this many seconds (0 = off: a jump at loss)",
 }
-# Seconds between frames when the caller gives no capture times (the blend's spring needs them).
-DEFAULT_FRAME_S = 0.01
 # The limb whose poses, mirrored, each limb also remembers (limb memory).
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
@@ -111,7 +109,6 @@ class LimbFiller:
         # usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every 0.5 s
         # were 27-29 mm off on average with a jump at loss, 12-14 mm with a half-life of 0.1 s.
         self.blend_omega = af.BLEND_X / blend_half_life_s if blend_half_life_s > 0 else 0.0
-        self.frame_s, self.last_time_s = DEFAULT_FRAME_S, float("nan")
         # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
         # ones on their swivel circle; a lost ankle carried by its foot and a lost end by the bone
         # before it. State: the last well-defined bend direction per run (joint, end, frame kind),
@@ -132,12 +129,7 @@ class LimbFiller:
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
-        self.blend_offset, self.blend_velocity = np.zeros((n, 3)), np.zeros((n, 3))
-        self.last_out, self.last_status = np.zeros((n, 3)), np.zeros(n, np.int64)
-        # the sources' course, for the blend: last position and step, and where each kind was last seen
-        self.last_raw, self.raw_vel = np.zeros((n, 3)), np.zeros((n, 3))
-        self.seen_raw, self.seen_age = np.zeros((n, 2, 3)), np.full((n, 2), 1 << 30, np.int64)
-        self.has_last = np.zeros(1, bool)
+        self.blend = af.BlendState.empty(n)
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                            c.twists[self.joints], c.has_twist[self.joints])
@@ -145,9 +137,9 @@ class LimbFiller:
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray,
              time_s: float = float("nan")) -> FillStats:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton).
-        ``time_s``: the frame's capture time, which paces the blend (else DEFAULT_FRAME_S a frame)."""
+        ``time_s``: the frame's capture time, which paces the blend (else af.DEFAULT_FRAME_S a frame)."""
         t0 = time.perf_counter()
-        self._advance_clock(time_s)
+        self.blend.advance_clock(time_s)
         out = np.zeros(4)
         idx, prev_pos, prev_frames = self.joints, self.prev_pos, self.prev_frames
         if self.carried is not None and self.has_prev[0]:
@@ -171,20 +163,9 @@ class LimbFiller:
                    self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
                    p.escape_max_deg, out)
         if self.reacquire_step_m > 0 or self.blend_omega > 0:
-            af.blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
-                                 self.seen_age, self.last_status, self.has_last, self.blend_offset,
-                                 self.blend_velocity, self.reacquire_step_m,
-                                 self.blend_omega, self.frame_s)
+            self.blend.blend(positions, status, idx, self.reacquire_step_m, self.blend_omega)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
-
-    def _advance_clock(self, time_s: float) -> None:
-        """The time since the last frame; a missing, repeated or backward stamp (a looping file, a
-        restarted QTM) or one over a second keeps the last good interval."""
-        step = time_s - self.last_time_s
-        if 0 < step <= 1.0:
-            self.frame_s = step
-        self.last_time_s = time_s
 
 
 @njit(cache=True)
