@@ -305,7 +305,8 @@ def carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames):
 
 @dataclass
 class BlendState:
-    """What blend_transitions keeps per joint of a limb between frames, and the limb's frame clock."""
+    """The blend of a limb: its settings (``step``: reacquire_step_m; ``omega``: the spring's, from
+    blend_half_life_s), what blend_transitions keeps per joint between frames, and the frame clock."""
     last_out: np.ndarray      # (n, 3) the last output
     last_raw: np.ndarray      # (n, 3) the source's last position, before the offset
     raw_vel: np.ndarray       # (n, 3) and its last step
@@ -315,14 +316,20 @@ class BlendState:
     has_last: np.ndarray      # (1,) bool
     offset: np.ndarray        # (n, 3) the spring's offset
     offset_vel: np.ndarray    # (n, 3) and its velocity
+    step: float = 0.0
+    omega: float = 0.0
     frame_s: float = DEFAULT_FRAME_S
     last_time_s: float = float("nan")
 
     @classmethod
-    def empty(cls, n: int) -> "BlendState":
+    def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0) -> "BlendState":
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
-                   np.zeros((n, 3)))
+                   np.zeros((n, 3)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0)
+
+    @property
+    def on(self) -> bool:
+        return self.step > 0 or self.omega > 0
 
     def advance_clock(self, time_s: float) -> None:
         """The time since the last frame; a missing, repeated or backward stamp (a looping file, a
@@ -332,10 +339,10 @@ class BlendState:
             self.frame_s = step
         self.last_time_s = time_s
 
-    def blend(self, positions, status, idx, step: float, omega: float) -> None:
+    def blend(self, positions, status, idx) -> None:
         blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
-                          self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, step, omega,
-                          self.frame_s)
+                          self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.step,
+                          self.omega, self.frame_s)
 
 
 @njit(cache=True)

@@ -191,6 +191,11 @@ def gap_windows(start: int, stop: int, length: int, every: int) -> list[tuple[in
     return [(a, min(a + length, stop)) for a in range(start, stop, every)]
 
 
+def _steps(track: np.ndarray) -> np.ndarray:
+    """Per-frame displacement of one point's track (F, 3): F - 1 distances."""
+    return np.linalg.norm(np.diff(track, axis=0), axis=-1)
+
+
 def transition_moves(run: GapRun, reference: np.ndarray, window: int = 3) -> list[dict]:
     """How each joint moves where its markers go (loss) and come back (return), next to its normal
     per-frame motion (the 95th percentile of the reference's per-frame displacement): the largest
@@ -200,9 +205,9 @@ def transition_moves(run: GapRun, reference: np.ndarray, window: int = 3) -> lis
     out = []
     for k, joint in enumerate(run.joints):
         est, ref = run.estimate[:, k], reference[:, INDEX[joint]]
-        step = np.linalg.norm(np.diff(est, axis=0), axis=-1)
-        added = np.linalg.norm(np.diff(est, axis=0) - np.diff(ref, axis=0), axis=-1)
-        normal = float(np.nanpercentile(np.linalg.norm(np.diff(ref, axis=0), axis=-1), 95))
+        step = _steps(est)
+        added = _steps(est - ref)  # |step of the estimate - step of the reference|
+        normal = float(np.nanpercentile(_steps(ref), 95))
         row = {"joint": joint, "normal_step_m": normal}
         for event, frames in (("loss", [a for a, _ in run.windows]), ("return", [b for _, b in run.windows])):
             spans = [(max(0, f - window), min(len(step), f + window)) for f in frames if 0 < f < len(est)]
@@ -241,7 +246,7 @@ def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int =
     changes, filled, worst = [], [], []
     filled_status = (int(Status.ESTIMATED), int(Status.HELD))
     for j, joint in enumerate(JOINTS):
-        step = np.linalg.norm(np.diff(positions[:, j], axis=0), axis=-1)
+        step = _steps(positions[:, j])
         located = status[:, j] == Status.LOCATED
         both = located[1:] & located[:-1]
         if both.sum() < min_located:

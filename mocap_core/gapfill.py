@@ -100,15 +100,14 @@ class LimbFiller:
         self.prev_parent_frame = np.full((3, 3), np.nan)
         self.has_prev = np.zeros(1, bool)
         # Re-acquisition without a twitch (beyond the thesis): when a joint's markers come back, the
-        # gap between where IK had it and where the markers are is closed by at most this much per
+        # gap between where IK had it and where the markers are is closed by at most reacquire_step_m per
         # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
-        self.reacquire_step_m = reacquire_step_m
-        # Inertialization at both ends of a gap (issue 9): a joint whose markers are lost goes on where it
-        # was heading, then eases into the estimate; one whose markers come back eases into them. The
-        # offset dies out as a critically damped spring (af.blend_transitions). Short gaps, the studio's
-        # usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every 0.5 s
-        # were 27-29 mm off on average with a jump at loss, 12-14 mm with a half-life of 0.1 s.
-        self.blend_omega = af.BLEND_X / blend_half_life_s if blend_half_life_s > 0 else 0.0
+        # Inertialization at both ends of a gap (issue 9, blend_half_life_s): a joint whose markers are lost
+        # goes on where it was heading, then eases into the estimate; one whose markers come back eases into
+        # them. The offset dies out as a critically damped spring (af.blend_transitions). Short gaps, the
+        # studio's usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every
+        # 0.5 s were 27-29 mm off on average with a jump at loss, 12-14 mm with a half-life of 0.1 s.
+        self.blend = af.BlendState.empty(n, reacquire_step_m, blend_half_life_s)
         # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
         # ones on their swivel circle; a lost ankle carried by its foot and a lost end by the bone
         # before it. State: the last well-defined bend direction per run (joint, end, frame kind),
@@ -129,7 +128,6 @@ class LimbFiller:
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
-        self.blend = af.BlendState.empty(n)
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                            c.twists[self.joints], c.has_twist[self.joints])
@@ -162,8 +160,8 @@ class LimbFiller:
                    self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
                    self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
                    p.escape_max_deg, out)
-        if self.reacquire_step_m > 0 or self.blend_omega > 0:
-            self.blend.blend(positions, status, idx, self.reacquire_step_m, self.blend_omega)
+        if self.blend.on:
+            self.blend.blend(positions, status, idx)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 

@@ -24,21 +24,14 @@ def run(rate_hz: float, lost: range, half_life: float = HALF_LIFE, step: float =
         bias=lambda f: BIAS, velocity=VELOCITY):
     """One joint moving along a line; in the ``lost`` frames its source is an estimate ``bias(frame)`` off
     the truth. Returns the output and the truth, per frame."""
-    dt = 1.0 / rate_hz
-    omega = af.BLEND_X / half_life if half_life > 0 else 0.0
-    state = dict(last_out=np.zeros((1, 3)), last_raw=np.zeros((1, 3)), raw_vel=np.zeros((1, 3)),
-                 seen_raw=np.zeros((1, 2, 3)), seen_age=np.full((1, 2), 1 << 30, np.int64),
-                 last_status=np.zeros(1, np.int64),
-                 has_last=np.zeros(1, bool), offset=np.zeros((1, 3)), offset_vel=np.zeros((1, 3)))
+    blend = af.BlendState.empty(1, step, half_life)
     out, truth = [], []
     for f in range(frames):
-        true = START + velocity * f * dt
+        blend.advance_clock(f / rate_hz)
+        true = START + velocity * f / rate_hz
         status = np.array([ESTIMATED if f in lost else LOCATED], np.int64)
         positions = (true + (bias(f) if f in lost else 0.0)).reshape(1, 3).copy()
-        af.blend_transitions(positions, status, np.array([0]), state["last_out"], state["last_raw"], state["raw_vel"],
-                             state["seen_raw"], state["seen_age"], state["last_status"], state["has_last"],
-                             state["offset"], state["offset_vel"], step,
-                             omega, dt)
+        blend.blend(positions, status, np.array([0]))
         out.append(positions[0].copy())
         truth.append(true)
     return np.array(out), np.array(truth)
