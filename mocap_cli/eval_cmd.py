@@ -65,6 +65,7 @@ def add_parser(sub) -> None:
     g.add_argument("--swivel", action="store_true", help=BEYOND_THESIS_HELP["swivel"])
     g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
     g.add_argument("--limb-memory", action="store_true", help=BEYOND_THESIS_HELP["limb_memory"])
+    g.add_argument("--body-model", action="store_true", help=BEYOND_THESIS_HELP["body_model"])
     g.add_argument("--learned-lengths", action="store_true", help=BEYOND_THESIS_HELP["learned_lengths"])
     g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
     g.add_argument("--pose-memory", action="store_true", help=POSE_MEMORY_HELP)
@@ -185,7 +186,7 @@ def run_gaps(args) -> int:
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry, "limb_memory": args.limb_memory,
-                                          "learned_lengths": args.learned_lengths,
+                                          "learned_lengths": args.learned_lengths, "body_model": args.body_model,
                                           "blend_half_life_s": args.blend_half_life},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
@@ -307,6 +308,7 @@ def run_real_gaps(args) -> int:
 def options_text(args) -> str:
     on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
                                   ("--limb-memory", args.limb_memory), ("--learned-lengths", args.learned_lengths),
+                                  ("--body-model", args.body_model),
                                   ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory)) if flag]
     if args.reacquire_step:
         on.append(f"--reacquire-step {args.reacquire_step}")

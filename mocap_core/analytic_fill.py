@@ -165,7 +165,7 @@ def usual_direction(k, dir_sum, dir_sq, dir_n):
 
 @njit(cache=True)
 def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, prev_pos, prev_frames,
-              bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths):
+              bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths, modelled, model_weight):
     pa, pk, pb = prev_pos[a], prev_pos[k], prev_pos[b]
     upper, lower = vnorm(pk - pa), vnorm(pb - pk)
     if b == k + 1:  # a lone joint: both its bones as learned
@@ -217,6 +217,8 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
         fit = True
     if fit:
         u = on_circle_fitting(u, axis, radius, target - centre, ref_now, mean, weight, to_recalled, pull)
+    if b == k + 1 and model_weight[k] > 0 and all_finite(modelled[k]):
+        u = _turn_towards(u, axis, modelled[k] - centre, model_weight[k])
     joint = centre + radius * u
     positions[idx[k]] = joint
     # the rest of the run: its last shape, turned with the plane of (a, k, b)
@@ -236,11 +238,25 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
 
 
 @njit(cache=True)
+def _turn_towards(u, axis, to_point, weight):
+    """The direction ``weight`` of the way from ``u`` to ``to_point``'s, both on the circle about ``axis``
+    (the mean of the two points on the circle, put back on it; u where they are opposite)."""
+    v = to_point - vdot(to_point, axis) * axis
+    size = vnorm(v)
+    if not size > 1e-9:
+        return u
+    w = (1.0 - weight) * u + weight * v / size
+    size = vnorm(w)
+    return w / size if size > 1e-9 else u
+
+
+@njit(cache=True)
 def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, prev_parent, bend, bend_ok,
-                dir_sum, dir_sq, dir_n, recalled, lengths):
+                dir_sum, dir_sq, dir_n, recalled, lengths, modelled, model_weight):
     """Fill every run of missing joints that has a located joint on both sides; returns how many.
     ``recalled``: per chain joint, where the limb memory puts it (NaN: no memory); ``lengths``: the
-    learned bone lengths (learn_lengths)."""
+    learned bone lengths (learn_lengths); ``modelled``, ``model_weight``: per chain joint, where the body
+    model puts it and how far a lone joint turns towards it on its circle (0: no model)."""
     parent_now = frames[parent].copy()
     if not (all_finite(parent_now) and all_finite(prev_parent)):
         return 0
@@ -255,7 +271,8 @@ def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, p
         if b == n:  # no located joint after the run: Algorithm 1's carry handles it
             break
         filled += _fill_run(positions, frames, status, idx, k - 1, k, b, parent_now, prev_parent, prev_pos,
-                            prev_frames, bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths)
+                            prev_frames, bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths, modelled,
+                            model_weight)
         k = b + 1
     return filled
 

@@ -27,6 +27,7 @@ from numba import njit
 
 from mocap_core import analytic_fill as af
 from mocap_core.analytic_fill import all_finite
+from mocap_core.body_model import BODY_MODEL_HELP, MODELLED, BodyModel
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
@@ -48,7 +49,7 @@ LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
 # The gap-filling options beyond the thesis, as the studio launch files, `mocap solve` and
 # `mocap eval timing --beyond` use them (README "Results").
 BEYOND_THESIS = {"swivel": True, "segment_carry": True, "limb_memory": True, "learned_lengths": True,
-                 "reacquire_step_m": 0.01, "blend_half_life_s": 0.1}
+                 "body_model": True, "reacquire_step_m": 0.01, "blend_half_life_s": 0.1}
 # What each of them does, said once for the node's params and `mocap eval gaps --help`.
 BEYOND_THESIS_HELP = {
     "swivel": "beyond the thesis: missing joints between two located ones from bone lengths and the swivel "
@@ -60,6 +61,7 @@ BEYOND_THESIS_HELP = {
                        "as long as in the last frame before the gap (with swivel)",
     "reacquire_step_m": "beyond the thesis: close the gap to returning markers by at most this many metres a "
                         "frame (0 = the thesis's method: jump)",
+    "body_model": BODY_MODEL_HELP,
     "blend_half_life_s": "beyond the thesis: when a joint's markers are lost or come back, go on where the joint "
                          "was heading and let the offset to the new source die out as a critically damped spring "
                          "that halves it in this many seconds (0 = off: a jump at loss)",
@@ -85,7 +87,7 @@ class LimbFiller:
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
                  segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0):
+                 blend_half_life_s: float = 0.0, body_model: bool = False):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -125,6 +127,13 @@ class LimbFiller:
         self.memory = LimbMemory(n, None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]]))\
             if limb_memory else None
         self.no_recall = np.full((n, 3), np.nan)
+        # The body model (issue 9): a lone lost elbow or knee turned on its circle towards where a regression
+        # from the rest of the located body puts it (mocap_core.body_model). Dance set, eight arms, elbow hidden
+        # from 1 s: dance2's 36 / 35 mm -> 29 / 31 (prototype).
+        middle = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED]
+        self.body_model = BodyModel(self.joints, np.array([INDEX[j] for j in LIMB_CHAINS[other]]), middle[0],
+                                    self.parent_of_root) if body_model and other and middle else None
+        self.modelled, self.model_weight = np.full((n, 3), np.nan), np.zeros(n)
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
@@ -151,10 +160,13 @@ class LimbFiller:
             if self.memory is not None:
                 self.memory.learn(positions, frames, status, idx, self.parent_of_root)
                 recalled = self.memory.recall(positions, frames, status, idx, self.parent_of_root)
+            if self.body_model is not None:
+                self._model(positions, frames, status)
             if self.has_prev[0]:
                 out[0] += af.swivel_fill(positions, frames, status, idx, self.parent_of_root, prev_pos, prev_frames,
                                          self.prev_parent_frame, self.bend, self.bend_ok, self.dir_sum,
-                                         self.dir_sq, self.dir_n, recalled, self.lengths)
+                                         self.dir_sq, self.dir_n, recalled, self.lengths, self.modelled,
+                                         self.model_weight)
         p = self.params
         _fill_limb(positions, frames, status, self.joints, self.parent_of_root, self.limb.endswith("arm"),
                    self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
@@ -164,6 +176,11 @@ class LimbFiller:
             self.blend.blend(positions, status, idx)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
+
+    def _model(self, positions, frames, status) -> None:
+        model = self.body_model
+        model.learn(positions, frames, status)
+        self.modelled[model.k], self.model_weight[model.k] = model.predict(positions, frames, status)
 
 
 @njit(cache=True)
@@ -240,10 +257,10 @@ class GapFiller:
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
                  segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0):
+                 blend_half_life_s: float = 0.0, body_model: bool = False):
         constraints = constraints if constraints is not None else load_constraints()
         self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel, segment_carry,
-                                       limb_memory, learned_lengths, blend_half_life_s)
+                                       limb_memory, learned_lengths, blend_half_life_s, body_model)
                       for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:

@@ -38,6 +38,7 @@ def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild, the pose memory, or one solve on a
     chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic fills of
     BEYOND_THESIS)."""
+    from mocap_core.body_model import MIN_SAMPLES
     from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.localization import Localizer
@@ -71,7 +72,8 @@ def _warm(part: str) -> None:
     status = np.full(N_JOINTS, Status.LOCATED, np.uint8)
     for k, j in enumerate(filler.joints):
         pos[j] = [0.0, 0.1, 1.0 - 0.2 * k]
-    filler.fill(pos, frames, status)
+    for _ in range(MIN_SAMPLES if filler.body_model is not None else 1):  # until the body model predicts
+        filler.fill(pos, frames, status)
     status[filler.joints[1]] = Status.MISSING
     pos[filler.joints[1]] = np.nan
     filler.fill(pos, frames, status)

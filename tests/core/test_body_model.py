@@ -1,0 +1,120 @@
+"""The body model: a lone lost elbow from a regression on the rest of the located body."""
+import numpy as np
+
+from mocap_core.body_model import MAX_WEIGHT, MIN_SAMPLES, BodyModel
+from mocap_core.gapfill import LimbFiller
+from mocap_core.hip_interpolation import HipInterpolator
+from mocap_core.localization import Localizer
+from mocap_core.profiles import LANDMARK_INDEX, load_profile
+from mocap_core.recordings import read_recording
+from mocap_core.skeleton import INDEX, JOINTS, N_JOINTS, Status
+from tests.conftest import data_file
+
+MIRROR = np.array([-1.0, 1.0, 1.0])
+# the left elbow from the left shoulder (chest frame = world, x to the subject's left) is this linear
+# function of where the head is from that shoulder; the right elbow is its mirror image
+GAIN = np.array([[0.5, 0.2, 0.0], [0.0, -0.4, 0.3], [0.1, 0.0, 0.6]])
+OFFSET = np.array([0.05, 0.0, -0.25])
+
+
+def body(rng, left_elbow_seen=True, scale=1.0):
+    """A random skeleton (every joint jittered about a mirror-symmetric base), both elbows placed by the
+    known linear rule."""
+    base = np.zeros((N_JOINTS, 3))
+    for j, name in enumerate(JOINTS):
+        side = -1.0 if name.endswith("_r") else 1.0
+        base[j] = [side * (0.05 + 0.01 * (j % 7)), 0.02 * (j % 5), 0.6 - 0.05 * j]
+    pos = base + scale * rng.normal(0.0, 0.05, base.shape)
+    for side, sign in (("l", np.ones(3)), ("r", MIRROR)):
+        shoulder = pos[INDEX[f"shoulder_{side}"]]
+        head = (pos[INDEX["head"]] - shoulder) * sign
+        pos[INDEX[f"elbow_{side}"]] = shoulder + (GAIN @ head + OFFSET) * sign
+    frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))
+    status = np.full(N_JOINTS, int(Status.LOCATED))
+    truth = pos[INDEX["elbow_l"]].copy()
+    if not left_elbow_seen:
+        pos[INDEX["elbow_l"]] = np.nan
+        status[INDEX["elbow_l"]] = Status.MISSING
+    return pos, frames, status, truth
+
+
+def left_arm_model():
+    chain = np.array([INDEX[j] for j in ("clavicle_l", "shoulder_l", "elbow_l", "wrist_l", "hand_l")])
+    other = np.array([INDEX[j] for j in ("clavicle_r", "shoulder_r", "elbow_r", "wrist_r", "hand_r")])
+    return BodyModel(chain, other, 2, INDEX["spine3"])
+
+
+def test_the_other_arms_mirrored_poses_teach_the_rule_known_answer():
+    """The left elbow is never seen: the model learns the rule from the right arm alone, mirrored, and
+    puts the left elbow where the rule does."""
+    rng = np.random.default_rng(0)
+    model = left_arm_model()
+    errors, weights = np.full(1500, np.nan), np.zeros(1500)
+    for f in range(1500):
+        pos, frames, status, truth = body(rng, left_elbow_seen=False)
+        model.learn(pos, frames, status)
+        point, weights[f] = model.predict(pos, frames, status)
+        if f < MIN_SAMPLES - 1:
+            assert np.isnan(point).all() and weights[f] == 0.0  # not trusted before MIN_SAMPLES poses
+        else:
+            errors[f] = np.linalg.norm(point - truth)
+    assert model.n[0] == 1500  # one (mirrored) pose a frame: the missing left elbow teaches nothing
+    # the rule is linear and exact, so only the ridge's shrinkage over 81 features is left, and it fades
+    # as the poses add up (the rule's own spread is 60 mm)
+    assert np.nanmean(errors[200:300]) < 0.015 and np.mean(errors[-300:]) < 0.002 and np.max(errors[-300:]) < 0.005, \
+        [round(np.nanmean(errors[a:a + 100]) * 1000, 1) for a in range(100, 1500, 200)]
+    # and it is trusted more as it learns, never past MAX_WEIGHT
+    assert weights[-300:].mean() > weights[200:300].mean() > 0 and weights.max() <= MAX_WEIGHT
+
+
+def test_a_pose_unlike_any_learned_is_trusted_less():
+    rng = np.random.default_rng(1)
+    model = left_arm_model()
+    for _ in range(300):
+        model.learn(*body(rng)[:3])
+    _, usual = model.predict(*body(rng, left_elbow_seen=False)[:3])
+    _, unusual = model.predict(*body(rng, left_elbow_seen=False, scale=8.0)[:3])
+    assert unusual < 0.5 * usual, (usual, unusual)
+
+
+def test_an_unlocated_joint_takes_the_mean_and_a_filled_one_teaches_nothing():
+    rng = np.random.default_rng(2)
+    model = left_arm_model()
+    for _ in range(100):
+        model.learn(*body(rng)[:3])
+    pos, frames, status, _ = body(rng, left_elbow_seen=False)
+    status[INDEX["knee_r"]] = Status.ESTIMATED  # another limb's filled joint
+    point, weight = model.predict(pos, frames, status)
+    assert np.isfinite(point).all() and weight > 0
+    learned = model.n[0]
+    pos, frames, status, _ = body(rng)
+    status[INDEX["knee_r"]] = Status.ESTIMATED
+    model.learn(pos, frames, status)
+    assert model.n[0] == learned
+
+
+def test_the_body_model_on_a_dancers_arm():
+    """dance2 of the 28-marker set, the left elbow hidden from 1 s to the end, the studio's swivel, segment
+    carry, limb memory and learned lengths on: the worst of the dance set's arms (36 mm mean). The body
+    model takes it under 31 mm, and the elbow stays on its circle."""
+    rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance2")
+    prof = load_profile("dance28")
+    lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
+    truth = Localizer(prof.body).localize(lm).positions
+    start = int(rec.rate_hz)
+    hidden = lm.copy()
+    hidden[start:, LANDMARK_INDEX["L_HLE"]] = np.nan
+    loc = Localizer(prof.body).localize(hidden)
+    mean, upper = {}, {}
+    for on in (False, True):
+        pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
+        filler = LimbFiller("left_arm", swivel=True, segment_carry=True, limb_memory=True, learned_lengths=True,
+                            body_model=on)
+        for f in range(len(pos)):
+            filler.fill(pos[f], frames[f], status[f])
+        assert (status[start:, INDEX["elbow_l"]] == Status.ESTIMATED).all()
+        elbow = pos[start:, INDEX["elbow_l"]]
+        mean[on] = np.linalg.norm(elbow - truth[start:, INDEX["elbow_l"]], axis=1).mean()
+        upper[on] = np.linalg.norm(elbow - pos[start:, INDEX["shoulder_l"]], axis=1)
+    assert mean[True] < 0.031 and mean[True] < 0.87 * mean[False], {k: round(v * 1000, 1) for k, v in mean.items()}
+    assert np.ptp(upper[True]) < 1e-6  # the learned upper arm, every frame
