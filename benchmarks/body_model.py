@@ -16,35 +16,21 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from karate_elbow import karate_elbow_lost  # noqa: E402
 from mocap_core.gapfill import BEYOND_THESIS, LimbFiller  # noqa: E402
-from mocap_core.hip_interpolation import HipInterpolator  # noqa: E402
-from mocap_core.localization import Localizer  # noqa: E402
-from mocap_core.profiles import LANDMARK_INDEX, load_profile  # noqa: E402
-from mocap_core.recordings import read_recording  # noqa: E402
-from mocap_core.warmup import warm_up  # noqa: E402
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def main() -> None:
-    path = DATA / "08_cmu_135_02_karate_kata.c3d"
-    if not path.exists():
-        raise SystemExit(f"{path} is missing: the benchmark reads the real recording from ../shared/data")
-    warm_up()
-    rec = read_recording(path)
-    prof = load_profile("cmu41")
-    lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
-    start = int(20 * rec.rate_hz)
-    lm[start:, LANDMARK_INDEX["L_HLE"]] = np.nan
-    loc = Localizer(prof.body).localize(lm)
+    loc, start, rate_hz = karate_elbow_lost()
     for model in (False, True):
         filler = LimbFiller("left_arm", **(BEYOND_THESIS | {"body_model": model}))
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
         took = np.empty(len(pos))
         for f in range(len(pos)):
             t = time.perf_counter()
-            filler.fill(pos[f], frames[f], status[f], f / rec.rate_hz)
+            filler.fill(pos[f], frames[f], status[f], f / rate_hz)
             took[f] = (time.perf_counter() - t) * 1e6
         gap, before = took[start:], took[:start]
         print(f"left arm, elbow lost from 20 s, body model {'on ' if model else 'off'}: per frame before the gap "

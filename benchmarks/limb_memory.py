@@ -15,28 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from karate_elbow import karate_elbow_lost  # noqa: E402
 from mocap_core.gapfill import LimbFiller  # noqa: E402
-from mocap_core.hip_interpolation import HipInterpolator  # noqa: E402
-from mocap_core.localization import Localizer  # noqa: E402
-from mocap_core.profiles import LANDMARK_INDEX, load_profile  # noqa: E402
-from mocap_core.recordings import read_recording  # noqa: E402
-from mocap_core.warmup import warm_up  # noqa: E402
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def main() -> None:
-    path = DATA / "08_cmu_135_02_karate_kata.c3d"
-    if not path.exists():
-        raise SystemExit(f"{path} is missing: the benchmark reads the real recording from ../shared/data")
-    warm_up()
-    rec = read_recording(path)
-    prof = load_profile("cmu41")
-    lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
-    start = int(20 * rec.rate_hz)
-    lm[start:, LANDMARK_INDEX["L_HLE"]] = np.nan
-    loc = Localizer(prof.body).localize(lm)
+    loc, start, _ = karate_elbow_lost()
     for memory in (False, True):
         filler = LimbFiller("left_arm", swivel=True, segment_carry=True, limb_memory=memory, reacquire_step_m=0.01)
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()

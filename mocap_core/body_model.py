@@ -4,8 +4,9 @@ The swivel (mocap_core.analytic_fill) puts a lone missing joint on the circle it
 the limb memory (mocap_core.limb_memory) pulls it towards where earlier poses with the next joint in
 the same place had it. Neither looks past the limb. A dancer's elbow goes with the rest of her: the
 other arm, the head, the trunk's lean, the hand's turn. This model is a ridge regression, learned
-online, from the whole located skeleton (every joint but the two elbows, or the two knees, from the
-limb's first joint in the limb parent's frame, and the next joint's frame) to the joint. It learns
+online, from the whole located skeleton (every joint but the two elbows, or the two knees, and those
+that repeat their neighbours, from the limb's first joint in the limb parent's frame, and the next
+joint's frame) to the joint. It learns
 from the limb's own located poses and from the other limb's, mirrored across the body, as the limb
 memory does, and never from filled joints.
 
@@ -19,13 +20,14 @@ model alone was 156; a nearest-neighbour search on the same features 191.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
-from scipy.linalg import cho_solve, solve_triangular
 
 from mocap_core.analytic_fill import LOCATED, MISSING, all_finite
 from mocap_core.ik.kernels import mtv
-from mocap_core.skeleton import INDEX, JOINTS
+from mocap_core.skeleton import END_SITES, INDEX, JOINTS
 
 BODY_MODEL_HELP = ("beyond the thesis: a lone lost elbow or knee turned on its swivel circle towards where a "
                    "regression from the rest of the located body, learned online from this limb and the other "
@@ -37,6 +39,10 @@ REFIT_SAMPLES = 60    # new poses before the model is refitted, when it is neede
 MAX_WEIGHT = 0.5      # of the turn towards the model's point, at zero leverage
 LEVERAGE_SCALE = 2.0  # the weight is MAX_WEIGHT / (1 + leverage / LEVERAGE_SCALE) (prototype: 0.5-4 within 2 mm)
 SD_FLOOR = 1e-3        # of a feature (metres, or a unit vector's component): constant ones stay harmless
+# Joints left out of the features: they repeat their neighbours (an end site is its parent's frame, the
+# clavicle joint the sternum point). Without them 60 features, not 81: the dance set's eight elbows
+# summed to 150.5 mm either way (prototype), and a refit costs 0.4x.
+REPEATED = frozenset(INDEX[j] for j in END_SITES | {"clavicle_l", "clavicle_r"})
 SWAPPED = np.array([INDEX[j[:-1] + {"l": "r", "r": "l"}[j[-1]]] if j[-2:] in ("_l", "_r") else INDEX[j]
                     for j in JOINTS], np.int64)
 
@@ -47,13 +53,13 @@ class BodyModel:
 
     def __init__(self, idx: np.ndarray, other: np.ndarray, k: int, parent: int):
         self.idx, self.other, self.k, self.parent = idx, other, k, parent
-        excluded = {int(idx[k]), int(other[k])}
+        excluded = {int(idx[k]), int(other[k])} | REPEATED
         self.features = np.array([j for j in range(len(JOINTS)) if j not in excluded], np.int64)
         d = 3 * len(self.features) + 6
         self.n = np.zeros(1)
         self.sx, self.sy = np.zeros(d), np.zeros(3)
         self.sxx, self.sxy = np.zeros((d, d)), np.zeros((d, 3))
-        self.x = np.zeros(d)
+        self.x, self.local = np.zeros(d), np.zeros(3)
         self.fitted_at = -1.0
         self.mu = self.sd = self.coef = self.chol = self.y_mean = None
 
@@ -73,26 +79,85 @@ class BodyModel:
             self._fit()
         if not _features(positions, frames, status, idx, k, self.parent, self.features, False, self.mu, self.x):
             return none
-        z = (self.x - self.mu) / self.sd
-        half = solve_triangular(self.chol, z, lower=True, check_finite=False)
-        leverage = float(half @ half)  # z^T (Z^T Z + RIDGE I)^-1 z
-        local = z @ self.coef + self.y_mean
-        ref = frames[self.parent]
-        point = positions[idx[k - 1]] + ref @ local
+        leverage = _predict(self.x, self.mu, self.sd, self.chol, self.coef, self.y_mean, self.local)
+        point = positions[idx[k - 1]] + frames[self.parent] @ self.local
         return point, MAX_WEIGHT / (1.0 + leverage / LEVERAGE_SCALE)
 
     def _fit(self) -> None:
-        n = self.n[0]
-        mu, y_mean = self.sx / n, self.sy / n
-        sxx = _symmetric(self.sxx)
-        var = np.maximum(np.diag(sxx) / n - mu * mu, 0.0)
-        sd = np.maximum(np.sqrt(var), SD_FLOOR)
-        zz = (sxx - n * np.outer(mu, mu)) / np.outer(sd, sd)      # Z^T Z of the standardized features
-        zy = (self.sxy - n * np.outer(mu, y_mean)) / sd[:, None]        # Z^T (y - mean)
-        # Cholesky, not an inverse: a third of the work (an 81 x 81 inverse took 350 us on this VM)
-        self.chol = np.linalg.cholesky(zz + RIDGE * np.eye(len(mu)))
-        self.coef, self.mu, self.sd, self.y_mean = cho_solve((self.chol, True), zy, check_finite=False), mu, sd, y_mean
-        self.fitted_at = n
+        self.mu, self.sd, self.y_mean, self.chol, self.coef = _fit(self.n[0], self.sx, self.sy, self.sxx, self.sxy)
+        self.fitted_at = self.n[0]
+
+
+@njit(cache=True)
+def _fit(n, sx, sy, sxx_upper, sxy):
+    """The ridge fit on the standardized features from the running sums: (means, SDs, the joint's mean,
+    the Cholesky factor L of Z^T Z + RIDGE I, the coefficients). Written out in numba: with numpy and
+    LAPACK calls a refit took 400 us in a frame on stop 22's VM (an 81 x 81 inverse 350 us alone)."""
+    d = sx.shape[0]
+    mu, y_mean = sx / n, sy / n
+    sd = np.empty(d)
+    for a in range(d):
+        sd[a] = max(math.sqrt(max(sxx_upper[a, a] / n - mu[a] * mu[a], 0.0)), SD_FLOOR)
+    chol = np.zeros((d, d))  # first Z^T Z + RIDGE I (lower triangle), then its factor in place
+    for a in range(d):
+        for b in range(a + 1):
+            chol[a, b] = (sxx_upper[b, a] - n * mu[a] * mu[b]) / (sd[a] * sd[b])
+        chol[a, a] += RIDGE
+    for j in range(d):
+        s = chol[j, j]
+        for k in range(j):
+            s -= chol[j, k] * chol[j, k]
+        chol[j, j] = math.sqrt(s)
+        for i in range(j + 1, d):
+            s = chol[i, j]
+            for k in range(j):
+                s -= chol[i, k] * chol[j, k]
+            chol[i, j] = s / chol[j, j]
+    coef = np.empty((d, 3))
+    for c in range(3):
+        rhs = np.empty(d)  # Z^T (y - mean), column c
+        for a in range(d):
+            rhs[a] = (sxy[a, c] - n * mu[a] * y_mean[c]) / sd[a]
+        coef[:, c] = _back(chol, _forward(chol, rhs))
+    return mu, sd, y_mean, chol, coef
+
+
+@njit(cache=True)
+def _forward(chol, b):
+    """L^-1 b."""
+    out = np.empty(b.shape[0])
+    for i in range(b.shape[0]):
+        s = b[i]
+        for k in range(i):
+            s -= chol[i, k] * out[k]
+        out[i] = s / chol[i, i]
+    return out
+
+
+@njit(cache=True)
+def _back(chol, b):
+    """L^-T b."""
+    d = b.shape[0]
+    out = np.empty(d)
+    for i in range(d - 1, -1, -1):
+        s = b[i]
+        for k in range(i + 1, d):
+            s -= chol[k, i] * out[k]
+        out[i] = s / chol[i, i]
+    return out
+
+
+@njit(cache=True)
+def _predict(x, mu, sd, chol, coef, y_mean, local):
+    """The joint from the limb's first joint (parent frame) into ``local``; returns the pose's leverage,
+    z^T (Z^T Z + RIDGE I)^-1 z = |L^-1 z|^2."""
+    z = (x - mu) / sd
+    local[:] = y_mean
+    for c in range(3):
+        for a in range(z.shape[0]):
+            local[c] += z[a] * coef[a, c]
+    half = _forward(chol, z)
+    return (half * half).sum()
 
 
 @njit(cache=True)
@@ -128,15 +193,6 @@ def _features(positions, frames, status, chain, k, parent, features, mirrored, f
 
 
 @njit(cache=True)
-def _symmetric(upper):
-    out = upper.copy()
-    for a in range(upper.shape[0]):
-        for b in range(a):
-            out[a, b] = upper[b, a]
-    return out
-
-
-@njit(cache=True)
 def _learn(positions, frames, status, idx, other, k, parent, features, x, n, sx, sy, sxx, sxy):
     for src in range(2):
         chain = idx if src == 0 else other
@@ -150,7 +206,7 @@ def _learn(positions, frames, status, idx, other, k, parent, features, x, n, sx,
         n[0] += 1
         for a in range(x.shape[0]):
             sx[a] += x[a]
-            for b in range(a, x.shape[0]):  # the upper triangle (BodyModel._fit mirrors it)
+            for b in range(a, x.shape[0]):  # the upper triangle (all _fit reads)
                 sxx[a, b] += x[a] * x[b]
             for b in range(3):
                 sxy[a, b] += x[a] * y[b]

@@ -143,7 +143,7 @@ def test_short_gaps_on_a_dancers_elbow():
     elbow hidden 0.1 s in every 0.5 s, the studio graphs' options with and without the blend. With it, each
     gap starts from where the markers were heading, so the fill is nearer, and the fill adds little motion
     of its own where the markers go and come back. The body model is off: it changes the estimate the blend
-    eases into (README: with it, 8.8 mm mean, and one loss at 1.5x where its estimate outran the elbow)."""
+    eases into (README: with it, 9 mm mean, and one loss at 1.6x where its estimate outran the elbow)."""
     rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance2")
     prof = load_profile("dance28")
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)

@@ -3,12 +3,8 @@ import numpy as np
 
 from mocap_core.body_model import MAX_WEIGHT, MIN_SAMPLES, BodyModel
 from mocap_core.gapfill import LimbFiller
-from mocap_core.hip_interpolation import HipInterpolator
-from mocap_core.localization import Localizer
-from mocap_core.profiles import LANDMARK_INDEX, load_profile
-from mocap_core.recordings import read_recording
 from mocap_core.skeleton import INDEX, JOINTS, N_JOINTS, Status
-from tests.conftest import data_file
+from tests.core.test_learned_lengths import dance_left_elbow_hidden
 
 MIRROR = np.array([-1.0, 1.0, 1.0])
 # the left elbow from the left shoulder (chest frame = world, x to the subject's left) is this linear
@@ -97,14 +93,7 @@ def test_the_body_model_on_a_dancers_arm():
     """dance2 of the 28-marker set, the left elbow hidden from 1 s to the end, the studio's swivel, segment
     carry, limb memory and learned lengths on: the worst of the dance set's arms (36 mm mean). The body
     model takes it under 31 mm, and the elbow stays on its circle."""
-    rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance2")
-    prof = load_profile("dance28")
-    lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
-    truth = Localizer(prof.body).localize(lm).positions
-    start = int(rec.rate_hz)
-    hidden = lm.copy()
-    hidden[start:, LANDMARK_INDEX["L_HLE"]] = np.nan
-    loc = Localizer(prof.body).localize(hidden)
+    truth, loc, start = dance_left_elbow_hidden("dance2")
     mean, upper = {}, {}
     for on in (False, True):
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()

@@ -48,20 +48,26 @@ def test_the_gap_keeps_the_mean_length_not_the_last_frames_known_answer():
     assert np.abs(upper_last - UPPER).min() > 0.01
 
 
+def dance_left_elbow_hidden(take: str):
+    """A take of the 28-marker dance set: (its joints localized whole, the reference; the same with the left
+    elbow's marker hidden from 1 s to the end; that first hidden frame)."""
+    rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), take)
+    prof = load_profile("dance28")
+    lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
+    truth = Localizer(prof.body).localize(lm).positions
+    start = int(rec.rate_hz)
+    hidden = lm.copy()
+    hidden[start:, LANDMARK_INDEX["L_HLE"]] = np.nan
+    return truth, Localizer(prof.body).localize(hidden), start
+
+
 def test_learned_lengths_on_a_dancers_arm():
     """walk2 of the 28-marker set, the left elbow hidden from 1 s to the end (swivel and limb memory on).
     When the arm straightens past its bones' reach, the swivel puts the elbow on the shoulder-wrist
     line, and the last frame's lengths then keep that stretch: the forearm goes from 261 to 274 mm for
     the rest of the gap. The learned ones stay as they were, and the elbow comes out nearer."""
-    rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "walk2")
-    prof = load_profile("dance28")
-    lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
-    truth = Localizer(prof.body).localize(lm).positions
-    start = int(rec.rate_hz)
+    truth, loc, start = dance_left_elbow_hidden("walk2")
     seen_fore = np.linalg.norm(truth[:start, INDEX["wrist_l"]] - truth[:start, INDEX["elbow_l"]], axis=1).mean()
-    hidden = lm.copy()
-    hidden[start:, LANDMARK_INDEX["L_HLE"]] = np.nan
-    loc = Localizer(prof.body).localize(hidden)
     mean, stretch = {}, {}
     for learned in (False, True):
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
