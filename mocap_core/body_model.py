@@ -201,6 +201,8 @@ def _learn(positions, frames, status, idx, other, k, parent, features, x, n, sx,
         if not _features(positions, frames, status, chain, k, parent, features, src == 1, None, x):
             continue
         y = mtv(frames[parent].copy(), positions[chain[k]] - positions[chain[k - 1]])
+        if not all_finite(y):  # a "located" joint without a position: one NaN would spoil the sums for good
+            continue
         if src == 1:
             y[0] = -y[0]
         n[0] += 1

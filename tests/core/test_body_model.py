@@ -89,6 +89,27 @@ def test_an_unlocated_joint_takes_the_mean_and_a_filled_one_teaches_nothing():
     assert model.n[0] == learned
 
 
+def test_a_nan_flood_teaches_nothing_and_predicts_nothing():
+    rng = np.random.default_rng(3)
+    model = left_arm_model()
+    for _ in range(100):
+        model.learn(*body(rng)[:3])
+    learned = model.n[0]
+    pos, frames, status, _ = body(rng)
+    pos[INDEX["elbow_l"]] = np.nan  # "located" without a position: the right arm's pose alone is learned
+    model.learn(pos, frames, status)
+    assert model.n[0] == learned + 1 and np.isfinite(model.sxx).all() and np.isfinite(model.sxy).all()
+    sums = model.sxx.copy()
+    pos[:] = np.nan                 # everything
+    model.learn(pos, frames, status)
+    assert model.n[0] == learned + 1 and np.array_equal(model.sxx, sums)
+    status[INDEX["elbow_l"]] = Status.MISSING
+    point, weight = model.predict(pos, frames, status)
+    assert np.isnan(point).all() and weight == 0.0
+    frames[:] = np.nan              # no parent frame either
+    assert model.predict(pos, frames, status)[1] == 0.0
+
+
 def test_the_body_model_on_a_dancers_arm():
     """dance2 of the 28-marker set, the left elbow hidden from 1 s to the end, the studio's swivel, segment
     carry, limb memory and learned lengths on: the worst of the dance set's arms (36 mm mean). The body
