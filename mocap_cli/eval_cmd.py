@@ -131,7 +131,7 @@ def run_timing(args) -> int:
         w = csv.DictWriter(f, fieldnames=list(rows[0].as_dict()))
         w.writeheader()
         w.writerows(r.as_dict() for r in rows)
-    md = [f"Worst-case full-body gap fill{' with swivel, segment carry, limb memory, learned lengths and blend' if args.beyond else ''}, "
+    md = [f"Worst-case full-body gap fill{' with swivel, segment carry, limb memory, learned lengths, body model and blend' if args.beyond else ''}, "
           f"{rec.source.split('/')[-1]} ({rows[0].frames} frames, "
           f"{args.repeats} pass(es)), ms per frame. Kernel load/compile before timing: {warmup_s:.2f} s. "
           "\"max, best of passes\": the largest of each frame's fastest pass (every pass does the same work; "
