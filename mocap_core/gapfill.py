@@ -180,7 +180,8 @@ class LimbFiller:
     def _model(self, positions, frames, status) -> None:
         model = self.body_model
         model.learn(positions, frames, status)
-        self.modelled[model.k], self.model_weight[model.k] = model.predict(positions, frames, status)
+        self.modelled[model.k], self.model_weight[model.k] = model.predict(positions, frames, status,
+                                                                             self.blend.frame_s)
 
 
 @njit(cache=True)

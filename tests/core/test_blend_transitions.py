@@ -142,8 +142,7 @@ def test_short_gaps_on_a_dancers_elbow():
     """dance2 of the 28-marker set (no marker on the upper arm: the elbow's swivel is guessed), the left
     elbow hidden 0.1 s in every 0.5 s, the studio graphs' options with and without the blend. With it, each
     gap starts from where the markers were heading, so the fill is nearer, and the fill adds little motion
-    of its own where the markers go and come back. The body model is off: it changes the estimate the blend
-    eases into (README: with it, 9 mm mean, and one loss at 1.6x where its estimate outran the elbow)."""
+    of its own where the markers go and come back."""
     rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance2")
     prof = load_profile("dance28")
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
@@ -152,7 +151,7 @@ def test_short_gaps_on_a_dancers_elbow():
     runs = {}
     for half_life in (0.0, HALF_LIFE):
         runs[half_life] = gap_run(landmarks, reference, prof, ["elbow_l"], int(rec.rate_hz), rec.n_frames, "ccd",
-                                  True, "markers", fill_options=BEYOND_THESIS | {"blend_half_life_s": half_life, "body_model": False},
+                                  True, "markers", fill_options=BEYOND_THESIS | {"blend_half_life_s": half_life},
                                   short_gaps=(6, 30), rate_hz=rec.rate_hz)
     mean = {h: float(np.nanmean(r.error_m)) for h, r in runs.items()}
     moves = {h: transition_moves(r, reference)[0] for h, r in runs.items()}

@@ -1,7 +1,7 @@
 """The body model: a lone lost elbow from a regression on the rest of the located body."""
 import numpy as np
 
-from mocap_core.body_model import MAX_WEIGHT, MIN_SAMPLES, BodyModel
+from mocap_core.body_model import MAX_SPEED_M_S, MAX_WEIGHT, MIN_SAMPLES, BodyModel
 from mocap_core.gapfill import LimbFiller
 from mocap_core.skeleton import INDEX, JOINTS, N_JOINTS, Status
 from tests.core.test_learned_lengths import dance_left_elbow_hidden
@@ -11,6 +11,7 @@ MIRROR = np.array([-1.0, 1.0, 1.0])
 # function of where the head is from that shoulder; the right elbow is its mirror image
 GAIN = np.array([[0.5, 0.2, 0.0], [0.0, -0.4, 0.3], [0.1, 0.0, 0.6]])
 OFFSET = np.array([0.05, 0.0, -0.25])
+APART_S = 1.0  # the random poses stand a second apart, so the model point's speed cap does not bind
 
 
 def body(rng, left_elbow_seen=True, scale=1.0):
@@ -49,7 +50,7 @@ def test_the_other_arms_mirrored_poses_teach_the_rule_known_answer():
     for f in range(1500):
         pos, frames, status, truth = body(rng, left_elbow_seen=False)
         model.learn(pos, frames, status)
-        point, weights[f] = model.predict(pos, frames, status)
+        point, weights[f] = model.predict(pos, frames, status, APART_S)
         if f < MIN_SAMPLES - 1:
             assert np.isnan(point).all() and weights[f] == 0.0  # not trusted before MIN_SAMPLES poses
         else:
@@ -68,8 +69,8 @@ def test_a_pose_unlike_any_learned_is_trusted_less():
     model = left_arm_model()
     for _ in range(300):
         model.learn(*body(rng)[:3])
-    _, usual = model.predict(*body(rng, left_elbow_seen=False)[:3])
-    _, unusual = model.predict(*body(rng, left_elbow_seen=False, scale=8.0)[:3])
+    _, usual = model.predict(*body(rng, left_elbow_seen=False)[:3], APART_S)
+    _, unusual = model.predict(*body(rng, left_elbow_seen=False, scale=8.0)[:3], APART_S)
     assert unusual < 0.5 * usual, (usual, unusual)
 
 
@@ -80,13 +81,33 @@ def test_an_unlocated_joint_takes_the_mean_and_a_filled_one_teaches_nothing():
         model.learn(*body(rng)[:3])
     pos, frames, status, _ = body(rng, left_elbow_seen=False)
     status[INDEX["knee_r"]] = Status.ESTIMATED  # another limb's filled joint
-    point, weight = model.predict(pos, frames, status)
+    point, weight = model.predict(pos, frames, status, APART_S)
     assert np.isfinite(point).all() and weight > 0
     learned = model.n[0]
     pos, frames, status, _ = body(rng)
     status[INDEX["knee_r"]] = Status.ESTIMATED
     model.learn(pos, frames, status)
     assert model.n[0] == learned
+
+
+def test_the_models_point_moves_no_faster_than_its_cap():
+    """A pose unlike the last one (the linear model swings on a fast move) moves the point at most
+    MAX_SPEED_M_S; once the joint is seen again, the next gap starts afresh."""
+    rng = np.random.default_rng(4)
+    model = left_arm_model()
+    for _ in range(300):
+        model.learn(*body(rng)[:3])
+    frame_s = 1 / 200  # a QTM rate
+    pos, frames, status, _ = body(rng, left_elbow_seen=False)
+    first, _ = model.predict(pos, frames, status, frame_s)
+    pos2, frames2, status2, _ = body(rng, left_elbow_seen=False)
+    pos2[INDEX["shoulder_l"]] = pos[INDEX["shoulder_l"]]  # the same root: the point's move is the model's
+    second, _ = model.predict(pos2, frames2, status2, frame_s)
+    model.predict(*body(rng)[:3], frame_s)  # seen again: the next gap starts afresh
+    free, _ = model.predict(pos2, frames2, status2, frame_s)  # where the model alone puts it
+    limit = MAX_SPEED_M_S * frame_s
+    assert np.linalg.norm(free - first) > 3 * limit  # a swing the cap must hold back
+    np.testing.assert_allclose(second, first + (free - first) * limit / np.linalg.norm(free - first), atol=1e-12)
 
 
 def test_a_nan_flood_teaches_nothing_and_predicts_nothing():
@@ -104,10 +125,10 @@ def test_a_nan_flood_teaches_nothing_and_predicts_nothing():
     model.learn(pos, frames, status)
     assert model.n[0] == learned + 1 and np.array_equal(model.sxx, sums)
     status[INDEX["elbow_l"]] = Status.MISSING
-    point, weight = model.predict(pos, frames, status)
+    point, weight = model.predict(pos, frames, status, APART_S)
     assert np.isnan(point).all() and weight == 0.0
     frames[:] = np.nan              # no parent frame either
-    assert model.predict(pos, frames, status)[1] == 0.0
+    assert model.predict(pos, frames, status, APART_S)[1] == 0.0
 
 
 def test_the_body_model_on_a_dancers_arm():
