@@ -123,16 +123,16 @@ class LimbFiller:
         # (dance set walk2, left elbow hidden from 1 s: 23 -> 20 mm).
         self.learned_lengths = learned_lengths
         self.lengths = np.zeros((n, 2))
-        other = MIRRORED.get(limb)
-        self.memory = LimbMemory(n, None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]]))\
-            if limb_memory else None
+        other = MIRRORED.get(limb)  # the other limb's chain, whose poses both memories learn too, mirrored
+        other_idx = None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]], dtype=np.int64)
+        self.memory = LimbMemory(n, other_idx) if limb_memory else None
         self.no_recall = np.full((n, 3), np.nan)
         # The body model (issue 9): a lone lost elbow or knee turned on its circle towards where a regression
         # from the rest of the located body puts it (mocap_core.body_model). Dance set, eight arms, elbow hidden
         # from 1 s: dance2's 36 / 35 mm -> 29 / 31 (prototype).
         middle = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED]
-        self.body_model = BodyModel(self.joints, np.array([INDEX[j] for j in LIMB_CHAINS[other]]), middle[0],
-                                    self.parent_of_root) if body_model and other and middle else None
+        self.body_model = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) \
+            if body_model and other_idx is not None and middle else None
         self.modelled, self.model_weight = np.full((n, 3), np.nan), np.zeros(n)
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
