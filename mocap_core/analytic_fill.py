@@ -47,6 +47,19 @@ SOURCE_JUMP_M_S = 10.0
 FLICKER_FRAMES = 5
 # Seconds between frames when the caller gives no capture times (the blend's spring needs them).
 DEFAULT_FRAME_S = 0.01
+# After a loss, the output leaves the markers' course for the fill only as fast as the course can be trusted
+# less than the fill: by the weight w = c^2 / (c^2 + s^2), where c = COURSE_K * |a| t^2 / 2 is how far the
+# course has strayed t seconds on (|a| the joint's mean acceleration while located, at least ACCEL_FLOOR) and
+# s the fill's RMS miss where the markers came back (FILL_SD_PRIOR counted as one such). A pose-memory knee
+# misses by 36-47 mm there and stays on its course longer; an elbow swivel or rebuild by 16-32 mm. Short gaps
+# (0.1 s in every 0.5 s), knee+ankle on dance2 left 17.9 / 17.8 mm mean -> 11.7 / 10.8, right 15.6 / 15.7 ->
+# 10.5 / 10.8, dance1 13.5 / 13.5 -> 11.5 / 9.0; the elbows within 0.6 mm (dance2 9.1 / 10.4 -> 9.6 /
+# 10.0, their maxima 51 / 69 -> 42 / 63) but the sprint's, 4.0 -> 6.2 (its arms swing hardest). COURSE_K 1
+# and 10 (prototype): the elbows 3-8 mm worse, or the knees 3-4 mm.
+COURSE_K = 3.0
+ACCEL_FLOOR = 1.0       # m/s^2
+FILL_SD_PRIOR = 0.01    # metres
+EASED = 0.999           # the weight at which the fill is taken whole
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 
 
@@ -333,6 +346,13 @@ class BlendState:
     has_last: np.ndarray      # (1,) bool
     offset: np.ndarray        # (n, 3) the spring's offset
     offset_vel: np.ndarray    # (n, 3) and its velocity
+    course: np.ndarray        # (n, 3) where the markers' course leads, since they were lost
+    course_step: np.ndarray   # (n, 3) and its step
+    since_loss: np.ndarray    # (n,) seconds since the markers were lost (inf: no loss being eased)
+    eased: np.ndarray         # (n,) and how far it has gone from that course towards the fill (0-1)
+    trust: np.ndarray         # (n, 5) sum of |acceleration| while located, and how many; sum of the fill's
+    #                           squared misses where the markers came back, and how many (course_weight);
+    #                           frames located in a row
     step: float = 0.0
     omega: float = 0.0
     frame_s: float = DEFAULT_FRAME_S
@@ -342,7 +362,8 @@ class BlendState:
     def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0) -> "BlendState":
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
-                   np.zeros((n, 3)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0)
+                   np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n), np.zeros((n, 5)), step,
+                   BLEND_X / half_life_s if half_life_s > 0 else 0.0)
 
     @property
     def on(self) -> bool:
@@ -358,8 +379,8 @@ class BlendState:
 
     def blend(self, positions, status, idx) -> None:
         blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
-                          self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.step,
-                          self.omega, self.frame_s)
+                          self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.course,
+                          self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega, self.frame_s)
 
 
 @njit(cache=True)
@@ -371,15 +392,31 @@ def _take_step(velocity, step, limit):
 
 
 @njit(cache=True)
-def _spring_blend(p, s, was, k, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel, step, omega, dt, decay):
-    """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place."""
+def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel, course,
+                  course_step, since_loss, eased, trust, step, omega, dt, decay):
+    """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
+    a loss, eased from the markers' course into that (see blend_transitions)."""
     kind = 0 if s == LOCATED else 1
     raw = p.copy()
-    course = last_raw[k] + raw_vel[k]
+    markers_step = raw_vel[k].copy()  # (the markers' last step, at a loss)
+    lost = s != LOCATED and was == LOCATED
     found_or_lost = (s == LOCATED) != (was == LOCATED)
-    jumped = s != LOCATED and was != LOCATED and vnorm(raw - course) > SOURCE_JUMP_M_S * dt
+    jumped = s != LOCATED and was != LOCATED and vnorm(raw - (last_raw[k] + raw_vel[k])) > SOURCE_JUMP_M_S * dt
+    easing = since_loss[k] < math.inf
+    spring_moved = 0.0
+    trust[k, 4] = trust[k, 4] + 1 if s == LOCATED else 0
+    if trust[k, 4] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two steps of the markers
+        trust[k, 0] += vnorm(raw - last_raw[k] - raw_vel[k]) / (dt * dt)  # |acceleration|
+        trust[k, 1] += 1
+    if s == LOCATED and was != LOCATED and was != MISSING:  # how far the fill's course missed the markers
+        miss = vnorm(raw - (last_raw[k] + raw_vel[k]))
+        trust[k, 2] += miss * miss
+        trust[k, 3] += 1
     if was != MISSING and (found_or_lost or jumped):
-        offset[k] -= raw - course
+        if easing:  # the output left the spring's course for the markers': go on from the output
+            offset[k] = last_out[k] - last_raw[k]
+            since_loss[k] = math.inf
+        offset[k] -= raw - (last_raw[k] + raw_vel[k])
         offset_vel[k] = 0.0  # a new offset, eased from rest
         since = seen_age[k, kind]  # frames since this kind of source was last seen
         if found_or_lost and since <= FLICKER_FRAMES:
@@ -394,10 +431,34 @@ def _spring_blend(p, s, was, k, last_raw, raw_vel, seen_raw, seen_age, offset, o
         moved = vnorm(offset[k] - before)
         if step > 0 and moved > step:
             offset[k] = before + (offset[k] - before) * (step / moved)
+        spring_moved = min(moved, step)
     last_raw[k] = raw
     seen_raw[k, kind] = raw
     seen_age[k, kind] = 0
     p += offset[k]
+    if lost and trust[k, 1] > 0:
+        course[k], course_step[k], since_loss[k], eased[k] = p, markers_step, 0.0, 0.0
+    elif since_loss[k] < math.inf:
+        since_loss[k] += dt
+        course[k] += course_step[k]
+        w = course_weight(since_loss[k], trust[k])
+        w = 1.0 if w >= EASED else w
+        apart = vnorm(p - course[k])
+        if step > 0 and (w - eased[k]) * apart > step - spring_moved:  # reacquire_step_m caps the two together
+            w = eased[k] + max(step - spring_moved, 0.0) / apart
+        eased[k] = min(w, 1.0)
+        p[:] = course[k] + eased[k] * (p - course[k])
+        if eased[k] == 1.0:
+            since_loss[k] = math.inf
+
+
+@njit(cache=True)
+def course_weight(t, trust):
+    """How far the output has gone from the markers' course towards the fill, ``t`` seconds after a loss
+    (``trust``: a joint's row of BlendState.trust)."""
+    stray = COURSE_K * 0.5 * max(trust[0] / trust[1], ACCEL_FLOOR) * t * t
+    fill_var = (FILL_SD_PRIOR * FILL_SD_PRIOR + trust[2]) / (1.0 + trust[3])
+    return stray * stray / (stray * stray + fill_var)
 
 
 @njit(cache=True)
@@ -416,7 +477,7 @@ def _linear_return(p, s, was, last, offset, step):
 
 @njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last,
-                      offset, offset_vel, step, omega, dt):
+                      offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -443,10 +504,11 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
             offset[k] = 0.0
             offset_vel[k] = 0.0
             raw_vel[k] = 0.0
+            since_loss[k] = math.inf
         elif omega > 0:
             was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
-            _spring_blend(positions[j], s, was, k, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel, step,
-                          omega, dt, decay)
+            _spring_blend(positions[j], s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
+                          course, course_step, since_loss, eased, trust, step, omega, dt, decay)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):

@@ -47,7 +47,7 @@ TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 HEEL = "FCC"
 NEIGHBOURS = 20     # remembered poses averaged (dance1: 10 gives the same error, 20 half the jitter)
 FALLBACK_M = 0.1    # no own pose with the toe this near: the other leg's, mirrored, if one is nearer
-SMOOTHING = 0.5     # per frame: how far the estimate moves towards the remembered poses' mean
+SMOOTHING = 0.2     # per frame: how far the estimate moves towards the remembered poses' mean
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
 
 
