@@ -11,7 +11,8 @@
 - segment_carry: a lost ankle moves with its still-tracked foot (ankle, foot and toe are one body).
 - carry_lost_end: a lost end of the limb moves with the last tracked bone before it.
 - blend_transitions: a joint that changes source (markers lost or back) goes on where it was heading,
-  and the offset to the new source dies out (inertialization).
+  and the offset to the new source dies out (inertialization); after a loss it leaves its markers'
+  course for the fill only as the course grows less trustworthy than that fill has been.
 """
 from __future__ import annotations
 
@@ -48,14 +49,19 @@ FLICKER_FRAMES = 5
 # Seconds between frames when the caller gives no capture times (the blend's spring needs them).
 DEFAULT_FRAME_S = 0.01
 # After a loss, the output leaves the markers' course for the fill only as fast as the course can be trusted
-# less than the fill: by the weight w = c^2 / (c^2 + s^2), where c = COURSE_K * |a| t^2 / 2 is how far the
-# course has strayed t seconds on (|a| the joint's mean acceleration while located, at least ACCEL_FLOOR) and
-# s the fill's RMS miss where the markers came back (FILL_SD_PRIOR counted as one such). A pose-memory knee
-# misses by 36-47 mm there and stays on its course longer; an elbow swivel or rebuild by 16-32 mm. Short gaps
-# (0.1 s in every 0.5 s), knee+ankle on dance2 left 17.9 / 17.8 mm mean -> 11.7 / 10.8, right 15.6 / 15.7 ->
-# 10.5 / 10.8, dance1 13.5 / 13.5 -> 11.5 / 9.0; the elbows within 0.6 mm (dance2 9.1 / 10.4 -> 9.6 /
-# 10.0, their maxima 51 / 69 -> 42 / 63) but the sprint's, 4.0 -> 6.2 (its arms swing hardest). COURSE_K 1
-# and 10 (prototype): the elbows 3-8 mm worse, or the knees 3-4 mm.
+# less than the fill (the dead blending of game engines, weighted): by w = c^2 / (c^2 + s^2), where
+# c = COURSE_K * |a| t^2 / 2 is how far the course may have strayed t seconds on (|a| the joint's mean
+# acceleration while located, at least ACCEL_FLOOR) and s the fill's RMS miss where the markers came back
+# (FILL_SD_PRIOR counting as one such), the spring's offset included. Both are learned per joint: a
+# pose-memory knee on the dance set misses by 36-47 mm and stays on its course longer.
+# The spring's offset alone gave the course up at once, at the fill's own velocity: on dance2's knee and
+# ankle (0.1 s hidden in every 0.5 s) a fill that moved 30 mm a frame where the markers moved 5.
+# Short gaps, the studio options (prototype): knee+ankle on dance2 left 17.9 / 17.8 mm mean -> 11.1 /
+# 10.4, right 15.6 / 15.7 -> 10.0 / 10.7, dance1 left 13.5 / 13.5 -> 11.3 / 8.6; dance2's elbows 9.1 /
+# 10.4 -> 9.5 / 9.6; the sprint's elbow 4.0 -> 5.6 (its arms swing hardest; the spring's offset alone
+# keeps a rebuild's steady bias better). COURSE_K 1: dance2's elbows 13 mm, the sprint 12; 10: the knees
+# 13-15 mm. Without the weight (a fixed ease over 0.2 s) the sprint was 31 mm; the miss of the raw fill
+# instead of the output's, the sprint 6.2; the course's own misses at returns learned too, 8.3.
 COURSE_K = 3.0
 ACCEL_FLOOR = 1.0       # m/s^2
 FILL_SD_PRIOR = 0.01    # metres
@@ -408,8 +414,8 @@ def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age,
     if trust[k, 4] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two steps of the markers
         trust[k, 0] += vnorm(raw - last_raw[k] - raw_vel[k]) / (dt * dt)  # |acceleration|
         trust[k, 1] += 1
-    if s == LOCATED and was != LOCATED and was != MISSING:  # how far the fill's course missed the markers
-        miss = vnorm(raw - (last_raw[k] + raw_vel[k]))
+    if s == LOCATED and was != LOCATED and was != MISSING:  # how far the output's course missed the markers
+        miss = vnorm(raw - (last_raw[k] + raw_vel[k] + offset[k]))
         trust[k, 2] += miss * miss
         trust[k, 3] += 1
     if was != MISSING and (found_or_lost or jumped):
@@ -487,12 +493,17 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
     less where the old one was heading (its last position plus its own last step), so the output goes on
     as it went. The offset then dies out as a critically damped spring (Holden's, exact for any ``dt``),
     by at most ``step`` a frame when that is set. At loss the offset is the truth the estimate has not
-    got: over a short gap it keeps the joint near its markers' last course. An estimate that leaves its
+    got: over a short gap it keeps the joint near its markers' last course. After a loss the output also
+    stays on that course (the markers' last step, on and on), leaving it for the fill as course_weight
+    says, which learns from the joint how fast its markers turn and how far its fill missed them where
+    they came back (``trust``); ``step`` caps that too. An estimate that leaves its
     course faster than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met
     the same way; one handed between fills (estimated, held) without such a jump is not. A flickering
     marker swings the offset back and forth by the two sources' difference: nothing builds up.
     State per joint: ``last_raw`` and ``raw_vel``, the source's last position and step; ``seen_raw`` and
-    ``seen_age``, the last position of each kind of source (0 markers, 1 a fill) and frames since."""
+    ``seen_age``, the last position of each kind of source (0 markers, 1 a fill) and frames since;
+    ``course``, ``course_step``, ``since_loss`` and ``eased``, the markers' course after a loss and how far
+    the output has left it."""
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
     for k in range(n):
