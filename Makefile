@@ -122,6 +122,7 @@ results-short: $(STAMP)
 	$(call short_gaps,--take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d --profile vicon53 --remove elbow_r --from 1,elbow_vicon,--rebuild)
 	$(call short_gaps,--take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d --profile vicon53 --remove knee_r$(,)ankle_r --from 1,knee_ankle_vicon,--rebuild)
 	$(call short_gaps,--take $(DANCE):dance2 --profile dance28 --remove knee_l$(,)ankle_l --from 1,knee_ankle_dance2,--pose-memory)
+	$(call short_gaps,--take $(DANCE):dance1 --profile dance28 --remove knee_l$(,)ankle_l --from 1,knee_ankle_dance1,--pose-memory)
 	for take in dance1 dance2 walk1 walk2; do for side in l r; do \
 		$(BIN)/mocap eval gaps $(SHORT_GAPS) --take $(DANCE):$$take --profile dance28 --remove elbow_$$side --from 1 \
 			--constraints on --mode markers --no-plots --report docs/results/short_elbow_$${take}_$${side}_thesis || exit 1; \
