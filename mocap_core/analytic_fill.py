@@ -369,8 +369,8 @@ class BlendState:
     def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0) -> "BlendState":
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
-                   np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n), np.zeros((n, 5)), step,
-                   BLEND_X / half_life_s if half_life_s > 0 else 0.0)
+                   np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
+                   np.zeros((n, 5)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0)
 
     @property
     def on(self) -> bool:
@@ -387,7 +387,8 @@ class BlendState:
     def blend(self, positions, status, idx) -> None:
         blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
                           self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.course,
-                          self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega, self.frame_s)
+                          self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
+                          self.frame_s)
 
 
 @njit(cache=True)
