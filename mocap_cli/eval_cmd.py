@@ -75,6 +75,9 @@ def add_parser(sub) -> None:
                    help=BEYOND_THESIS_HELP["reacquire_step_m"])
     g.add_argument("--blend-half-life", type=float, default=0.0, metavar="S",
                    help=BEYOND_THESIS_HELP["blend_half_life_s"])
+    g.add_argument("--no-blend-course", dest="blend_course", action="store_false",
+                   help="the blend's spring alone (blend_course false); by default, "
+                                     + BEYOND_THESIS_HELP["blend_course"])
     g.add_argument("--gap-length", type=float, metavar="S",
                    help="short gaps instead of one: hide the joints for S seconds at a time, one gap every "
                         "--gap-every seconds from --from to --to (a studio's occlusions are mostly short)")
@@ -187,7 +190,7 @@ def run_gaps(args) -> int:
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry, "limb_memory": args.limb_memory,
                                           "learned_lengths": args.learned_lengths, "body_model": args.body_model,
-                                          "blend_half_life_s": args.blend_half_life},
+                                          "blend_half_life_s": args.blend_half_life, "blend_course": args.blend_course},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
                             pose_memory=args.pose_memory, short_gaps=short_gaps, rate_hz=rec.rate_hz))
@@ -314,6 +317,8 @@ def options_text(args) -> str:
         on.append(f"--reacquire-step {args.reacquire_step}")
     if args.blend_half_life:
         on.append(f"--blend-half-life {args.blend_half_life}")
+        if not args.blend_course:
+            on.append("--no-blend-course")
     if args.hips_lost != "hold":
         on.append(f"--hips-lost {args.hips_lost}")
     return " ".join(on) or "none beyond the thesis"

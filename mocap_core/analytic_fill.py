@@ -362,15 +362,16 @@ class BlendState:
     #                           frames located in a row
     step: float = 0.0
     omega: float = 0.0
+    course_on: bool = True    # blend_course: after a loss, leave the markers' course as course_weight says
     frame_s: float = DEFAULT_FRAME_S
     last_time_s: float = float("nan")
 
     @classmethod
-    def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0) -> "BlendState":
+    def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0, course: bool = True) -> "BlendState":
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
-                   np.zeros((n, 5)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0)
+                   np.zeros((n, 5)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
     @property
     def on(self) -> bool:
@@ -388,7 +389,7 @@ class BlendState:
         blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
                           self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.course,
                           self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
-                          self.frame_s)
+                          self.frame_s, self.course_on)
 
 
 @njit(cache=True)
@@ -401,7 +402,7 @@ def _take_step(velocity, step, limit):
 
 @njit(cache=True)
 def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel, course,
-                  course_step, since_loss, eased, trust, step, omega, dt, decay):
+                  course_step, since_loss, eased, trust, step, omega, dt, decay, course_on):
     """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
     a loss, eased from the markers' course into that (see blend_transitions)."""
     kind = 0 if s == LOCATED else 1
@@ -444,7 +445,7 @@ def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age,
     seen_raw[k, kind] = raw
     seen_age[k, kind] = 0
     p += offset[k]
-    if lost and trust[k, 1] > 0:
+    if lost and course_on and trust[k, 1] > 0:
         course[k], course_step[k], since_loss[k], eased[k] = p, markers_step, 0.0, 0.0
     elif since_loss[k] < math.inf:
         since_loss[k] += dt
@@ -485,7 +486,8 @@ def _linear_return(p, s, was, last, offset, step):
 
 @njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last,
-                      offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt):
+                      offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
+                      course_on=True):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -498,7 +500,8 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
     got: over a short gap it keeps the joint near its markers' last course. After a loss the output also
     stays on that course (the markers' last step, on and on), leaving it for the fill as course_weight
     says, which learns from the joint how fast its markers turn and how far its fill missed them where
-    they came back (``trust``); ``step`` caps that too. An estimate that leaves its
+    they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
+    stop 23). An estimate that leaves its
     course faster than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met
     the same way; one handed between fills (estimated, held) without such a jump is not. A flickering
     marker swings the offset back and forth by the two sources' difference: nothing builds up.
@@ -521,7 +524,7 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
         elif omega > 0:
             was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
             _spring_blend(positions[j], s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
-                          course, course_step, since_loss, eased, trust, step, omega, dt, decay)
+                          course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):

@@ -65,6 +65,9 @@ BEYOND_THESIS_HELP = {
     "blend_half_life_s": "beyond the thesis: when a joint's markers are lost or come back, go on where the joint "
                          "was heading and let the offset to the new source die out as a critically damped spring "
                          "that halves it in this many seconds (0 = off: a jump at loss)",
+    "blend_course": "with blend_half_life_s: after a loss, stay on the markers' course and leave it for the fill "
+                    "only as it grows less trustworthy than the fill has been where the markers came back "
+                    "(learned per joint; false: the spring alone)",
 }
 # The limb whose poses, mirrored, each limb also remembers (limb memory).
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
@@ -87,7 +90,7 @@ class LimbFiller:
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
                  segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0, body_model: bool = False):
+                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -109,7 +112,7 @@ class LimbFiller:
         # them. The offset dies out as a critically damped spring (af.blend_transitions). Short gaps, the
         # studio's usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every
         # 0.5 s were 27-29 mm off on average with a jump at loss, 12-14 mm with a half-life of 0.1 s.
-        self.blend = af.BlendState.empty(n, reacquire_step_m, blend_half_life_s)
+        self.blend = af.BlendState.empty(n, reacquire_step_m, blend_half_life_s, blend_course)
         # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
         # ones on their swivel circle; a lost ankle carried by its foot and a lost end by the bone
         # before it. State: the last well-defined bend direction per run (joint, end, frame kind),
@@ -258,10 +261,10 @@ class GapFiller:
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
                  segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0, body_model: bool = False):
+                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True):
         constraints = constraints if constraints is not None else load_constraints()
         self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel, segment_carry,
-                                       limb_memory, learned_lengths, blend_half_life_s, body_model)
+                                       limb_memory, learned_lengths, blend_half_life_s, body_model, blend_course)
                       for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:

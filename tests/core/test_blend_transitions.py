@@ -21,10 +21,10 @@ START = np.array([1.0, 2.0, 0.5])     # where the line starts (not the origin)
 
 
 def run(rate_hz: float, lost: range, half_life: float = HALF_LIFE, step: float = 0.0, frames: int = 80,
-        bias=lambda f: BIAS, velocity=VELOCITY):
+        bias=lambda f: BIAS, velocity=VELOCITY, course: bool = True):
     """One joint moving along a line; in the ``lost`` frames its source is an estimate ``bias(frame)`` off
     the truth. Returns the output and the truth, per frame."""
-    blend = af.BlendState.empty(1, step, half_life)
+    blend = af.BlendState.empty(1, step, half_life, course)
     out, truth = [], []
     for f in range(frames):
         blend.advance_clock(f / rate_hz)
@@ -62,6 +62,23 @@ def test_a_lost_joint_goes_on_where_it_was_heading_then_eases_into_the_estimate_
     # alone adds at its fastest (the weight rises as t^4 while the spring's offset grows)
     extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
     assert extra.max() < 1.5 * BIAS[1] * omega / math.e / rate_hz
+
+
+@pytest.mark.parametrize("rate_hz", [60.0, 250.0])
+def test_without_the_course_the_spring_alone_eases_into_the_estimate_known_answer(rate_hz):
+    """blend_course false (as until stop 23): the offset from the estimate dies out as a critically damped
+    spring, o0 (1 + w t) e^(-w t), halved after the half-life whatever the frame rate."""
+    loss = int(0.1 * rate_hz)
+    out, truth = run(rate_hz, range(loss, 10_000), course=False)
+    error = out - truth
+    omega = af.BLEND_X / HALF_LIFE
+    for f in range(loss, len(out)):
+        t = (f - loss) / rate_hz
+        np.testing.assert_allclose(error[f], BIAS * (1 - (1 + omega * t) * math.exp(-omega * t)), atol=1e-12)
+    half = loss + int(round(HALF_LIFE * rate_hz))
+    assert abs(error[half, 1] - BIAS[1] / 2) < 0.002 * rate_hz / 60
+    extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
+    assert extra.max() < BIAS[1] * omega / math.e / rate_hz + 1e-9
 
 
 def test_returning_markers_are_met_without_a_step_known_answer():
@@ -195,18 +212,23 @@ def test_a_fill_that_missed_where_the_markers_came_back_is_trusted_later_after_a
 
 def test_short_gaps_on_a_dancers_knee_and_ankle():
     """dance2, the left knee and ankle hidden 0.1 s in every 0.5 s: the pose memory's fill misses the
-    returning markers by 40-50 mm, so after a loss the output stays on the markers' course longer. With the
-    studio options: 11.7 / 10.8 mm mean (17.9 / 17.8 with the blend's spring alone, stop 22), and the fill
-    adds at most 0.65x the joints' normal step where the markers go (1.63x)."""
+    returning markers by 42 mm, so after a loss the output stays on the markers' course longer. With the
+    studio options: 11.1 / 10.4 mm mean (17.9 / 17.8 with the blend's spring alone), and the fill adds at
+    most 0.65x the joints' normal step where the markers go (1.63x)."""
     rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance2")
     prof = load_profile("dance28")
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
     landmarks = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
-    run_ = gap_run(landmarks, reference, prof, ["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, "ccd", True,
-                   "markers", fill_options=BEYOND_THESIS, pose_memory=True, short_gaps=(6, 30), rate_hz=rec.rate_hz)
-    means = np.nanmean(run_.error_m, axis=0)
-    assert (means < 0.014).all(), means
-    for move in transition_moves(run_, reference):
+    means, moves = {}, {}
+    for course in (False, True):
+        run_ = gap_run(landmarks, reference, prof, ["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, "ccd",
+                       True, "markers", fill_options=BEYOND_THESIS | {"blend_course": course}, pose_memory=True,
+                       short_gaps=(6, 30), rate_hz=rec.rate_hz)
+        means[course] = np.nanmean(run_.error_m, axis=0)
+        moves[course] = transition_moves(run_, reference)
+    assert (means[True] < 0.014).all() and (means[True] < 0.75 * means[False]).all(), means
+    for move in moves[True]:
         assert move["loss_added_ratio"] < 1.0, move
         assert move["return_added_ratio"] < 1.5, move
+    assert max(m["loss_added_ratio"] for m in moves[False]) > 1.5, moves
