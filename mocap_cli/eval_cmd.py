@@ -77,7 +77,7 @@ def add_parser(sub) -> None:
                    help=BEYOND_THESIS_HELP["blend_half_life_s"])
     g.add_argument("--no-blend-course", dest="blend_course", action="store_false",
                    help="the blend's spring alone (blend_course false); by default, "
-                                     + BEYOND_THESIS_HELP["blend_course"])
+                        + BEYOND_THESIS_HELP["blend_course"])
     g.add_argument("--gap-length", type=float, metavar="S",
                    help="short gaps instead of one: hide the joints for S seconds at a time, one gap every "
                         "--gap-every seconds from --from to --to (a studio's occlusions are mostly short)")

@@ -67,6 +67,9 @@ COURSE_K = 3.0
 ACCEL_FLOOR = 1.0       # m/s^2
 FILL_SD_PRIOR = 0.01    # metres
 EASED = 0.999           # the weight at which the fill is taken whole
+# BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
+# where the markers came back and how many; frames located in a row.
+ACC_SUM, ACC_N, MISS_SQ, MISS_N, LOCATED_RUN = range(5)
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 
 
@@ -357,9 +360,7 @@ class BlendState:
     course_step: np.ndarray   # (n, 3) and its step
     since_loss: np.ndarray    # (n,) seconds since the markers were lost (inf: no loss being eased)
     eased: np.ndarray         # (n,) and how far it has gone from that course towards the fill (0-1)
-    trust: np.ndarray         # (n, 5) sum of |acceleration| while located, and how many; sum of the fill's
-    #                           squared misses where the markers came back, and how many (course_weight);
-    #                           frames located in a row
+    trust: np.ndarray         # (n, 5) what course_weight learns from (columns ACC_SUM ... LOCATED_RUN)
     step: float = 0.0
     omega: float = 0.0
     course_on: bool = True    # blend_course: after a loss, leave the markers' course as course_weight says
@@ -407,25 +408,25 @@ def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age,
     a loss, eased from the markers' course into that (see blend_transitions)."""
     kind = 0 if s == LOCATED else 1
     raw = p.copy()
+    heading = last_raw[k] + raw_vel[k]  # where the source was heading
     markers_step = raw_vel[k].copy()  # (the markers' last step, at a loss)
     lost = s != LOCATED and was == LOCATED
     found_or_lost = (s == LOCATED) != (was == LOCATED)
-    jumped = s != LOCATED and was != LOCATED and vnorm(raw - (last_raw[k] + raw_vel[k])) > SOURCE_JUMP_M_S * dt
-    easing = since_loss[k] < math.inf
+    jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
     spring_moved = 0.0
-    trust[k, 4] = trust[k, 4] + 1 if s == LOCATED else 0
-    if trust[k, 4] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two steps of the markers
-        trust[k, 0] += vnorm(raw - last_raw[k] - raw_vel[k]) / (dt * dt)  # |acceleration|
-        trust[k, 1] += 1
+    trust[k, LOCATED_RUN] = trust[k, LOCATED_RUN] + 1 if s == LOCATED else 0
+    if trust[k, LOCATED_RUN] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two markers' steps
+        trust[k, ACC_SUM] += vnorm(raw - heading) / (dt * dt)  # |acceleration|
+        trust[k, ACC_N] += 1
     if s == LOCATED and was != LOCATED and was != MISSING:  # how far the output's course missed the markers
-        miss = vnorm(raw - (last_raw[k] + raw_vel[k] + offset[k]))
-        trust[k, 2] += miss * miss
-        trust[k, 3] += 1
+        miss = vnorm(raw - (heading + offset[k]))
+        trust[k, MISS_SQ] += miss * miss
+        trust[k, MISS_N] += 1
     if was != MISSING and (found_or_lost or jumped):
-        if easing:  # the output left the spring's course for the markers': go on from the output
+        if since_loss[k] < math.inf:  # the output left the spring's course for the markers': go on from it
             offset[k] = last_out[k] - last_raw[k]
             since_loss[k] = math.inf
-        offset[k] -= raw - (last_raw[k] + raw_vel[k])
+        offset[k] -= raw - heading
         offset_vel[k] = 0.0  # a new offset, eased from rest
         since = seen_age[k, kind]  # frames since this kind of source was last seen
         if found_or_lost and since <= FLICKER_FRAMES:
@@ -445,7 +446,7 @@ def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age,
     seen_raw[k, kind] = raw
     seen_age[k, kind] = 0
     p += offset[k]
-    if lost and course_on and trust[k, 1] > 0:
+    if lost and course_on and trust[k, ACC_N] > 0:
         course[k], course_step[k], since_loss[k], eased[k] = p, markers_step, 0.0, 0.0
     elif since_loss[k] < math.inf:
         since_loss[k] += dt
@@ -465,8 +466,8 @@ def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age,
 def course_weight(t, trust):
     """How far the output has gone from the markers' course towards the fill, ``t`` seconds after a loss
     (``trust``: a joint's row of BlendState.trust)."""
-    stray = COURSE_K * 0.5 * max(trust[0] / trust[1], ACCEL_FLOOR) * t * t
-    fill_var = (FILL_SD_PRIOR * FILL_SD_PRIOR + trust[2]) / (1.0 + trust[3])
+    stray = COURSE_K * 0.5 * max(trust[ACC_SUM] / trust[ACC_N], ACCEL_FLOOR) * t * t
+    fill_var = (FILL_SD_PRIOR * FILL_SD_PRIOR + trust[MISS_SQ]) / (1.0 + trust[MISS_N])
     return stray * stray / (stray * stray + fill_var)
 
 
