@@ -348,6 +348,7 @@ class BlendState:
     """The blend of a limb: its settings (``step``: reacquire_step_m; ``omega``: the spring's, from
     blend_half_life_s), what blend_transitions keeps per joint between frames, and the frame clock."""
     last_out: np.ndarray      # (n, 3) the last output
+    out_step: np.ndarray      # (n, 3) and its last step
     last_raw: np.ndarray      # (n, 3) the source's last position, before the offset
     raw_vel: np.ndarray       # (n, 3) and its last step
     seen_raw: np.ndarray      # (n, 2, 3) where each kind of source (0 markers, 1 a fill) was last seen
@@ -369,7 +370,7 @@ class BlendState:
 
     @classmethod
     def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0, course: bool = True) -> "BlendState":
-        return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
+        return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
                    np.zeros((n, 5)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
@@ -387,8 +388,8 @@ class BlendState:
         self.last_time_s = time_s
 
     def blend(self, positions, status, idx) -> None:
-        blend_transitions(positions, status, idx, self.last_out, self.last_raw, self.raw_vel, self.seen_raw,
-                          self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.course,
+        blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
+                          self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.course,
                           self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
                           self.frame_s, self.course_on)
 
@@ -402,8 +403,8 @@ def _take_step(velocity, step, limit):
 
 
 @njit(cache=True)
-def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel, course,
-                  course_step, since_loss, eased, trust, step, omega, dt, decay, course_on):
+def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
+                  course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on):
     """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
     a loss, eased from the markers' course into that (see blend_transitions)."""
     kind = 0 if s == LOCATED else 1
@@ -423,8 +424,10 @@ def _spring_blend(p, s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age,
         trust[k, MISS_SQ] += miss * miss
         trust[k, MISS_N] += 1
     if was != MISSING and (found_or_lost or jumped):
-        if since_loss[k] < math.inf:  # the output left the spring's course for the markers': go on from it
-            offset[k] = last_out[k] - last_raw[k]
+        if since_loss[k] < math.inf:
+            # the output left the spring's course for the markers': go on from it, at its own last step (the
+            # fill's can be a recall's jitter: on dance1's knee 31 mm a frame where the leg moved 10)
+            offset[k] = last_out[k] + out_step[k] - heading
             since_loss[k] = math.inf
         offset[k] -= raw - heading
         offset_vel[k] = 0.0  # a new offset, eased from rest
@@ -486,8 +489,8 @@ def _linear_return(p, s, was, last, offset, step):
 
 
 @njit(cache=True)
-def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last,
-                      offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
+def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
+                      has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
                       course_on=True):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
@@ -502,11 +505,13 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
     stays on that course (the markers' last step, on and on), leaving it for the fill as course_weight
     says, which learns from the joint how fast its markers turn and how far its fill missed them where
     they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
-    stop 23). An estimate that leaves its
+    stop 23). Markers that come back while the output is still leaving that course are met from the
+    output as it went (its own last step), not as the fill went. An estimate that leaves its
     course faster than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met
     the same way; one handed between fills (estimated, held) without such a jump is not. A flickering
     marker swings the offset back and forth by the two sources' difference: nothing builds up.
-    State per joint: ``last_raw`` and ``raw_vel``, the source's last position and step; ``seen_raw`` and
+    State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
+    ``raw_vel``, the source's last position and step; ``seen_raw`` and
     ``seen_age``, the last position of each kind of source (0 markers, 1 a fill) and frames since;
     ``course``, ``course_step``, ``since_loss`` and ``eased``, the markers' course after a loss and how far
     the output has left it."""
@@ -524,11 +529,12 @@ def blend_transitions(positions, status, idx, last_out, last_raw, raw_vel, seen_
             since_loss[k] = math.inf
         elif omega > 0:
             was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
-            _spring_blend(positions[j], s, was, k, last_out, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
-                          course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on)
+            _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
+                          offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):
+        out_step[k] = positions[idx[k]] - last_out[k]
         last_out[k] = positions[idx[k]]
         last_status[k] = status[idx[k]]
     has_last[0] = True

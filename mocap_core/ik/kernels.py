@@ -92,6 +92,25 @@ def axis_angle(axis, angle):
 
 
 @njit(cache=True)
+def rotation_vector(R):
+    """The rotation vector (unit axis times angle) of a rotation matrix, the inverse of axis_angle."""
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(angle) axis
+    s = vnorm(v)
+    if s < 1e-15:
+        return np.zeros(3)  # (the turns kept here are a few degrees, never near 180)
+    return v * (math.atan2(s, R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / s)
+
+
+@njit(cache=True)
+def turned_by(R, v):
+    """``R`` followed by the turn of rotation vector ``v`` in R's own axes."""
+    angle = vnorm(v)
+    if angle < 1e-15:
+        return R.copy()
+    return mm(R, axis_angle(v / angle, angle))
+
+
+@njit(cache=True)
 def rotation_between(a, b):
     """Shortest-arc rotation carrying direction a onto direction b (scalar code: no temporaries)."""
     na = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])

@@ -84,8 +84,11 @@ def test_without_the_course_the_spring_alone_eases_into_the_estimate_known_answe
 def test_returning_markers_are_met_without_a_step_known_answer():
     rate_hz, loss, back = 100.0, 10, 40
     out, truth = run(rate_hz, range(loss, back), frames=120)
-    # the frame the markers come back, the output goes on with the estimate's own step (the joint's here)
-    np.testing.assert_allclose(out[back] - out[back - 1], VELOCITY / rate_hz, atol=1e-12)
+    # the frame the markers come back, the output goes on with its own last step: it was still leaving the
+    # markers' course for the estimate (both along the line here), so that step is the line's and a bit of
+    # the estimate's bias
+    np.testing.assert_allclose(out[back] - out[back - 1], out[back - 1] - out[back - 2], atol=1e-12)
+    assert 0 < np.linalg.norm(out[back] - out[back - 1] - VELOCITY / rate_hz) < 1e-3  # (the line: 5 mm a frame)
     # then eases into them, and the offset is half gone after the half-life
     gap_at_return = np.linalg.norm(out[back] - truth[back])
     assert gap_at_return > 0.01
@@ -110,7 +113,7 @@ def test_an_estimate_that_jumps_to_another_source_mid_gap_is_met_smoothly_known_
     jump = np.array([0.0, 0.0, 0.3])
     out, truth = run(rate_hz, range(10, 10_000), bias=lambda f: BIAS + (jump if f >= jump_at else 0.0), frames=150)
     steps = np.diff(out, axis=0)
-    np.testing.assert_allclose(steps[jump_at - 1], VELOCITY / rate_hz, atol=1e-12)  # goes on as the source went
+    np.testing.assert_allclose(steps[jump_at - 1], steps[jump_at - 2], atol=1e-12)  # goes on as it went
     extra = np.linalg.norm(steps - np.diff(truth, axis=0), axis=1)
     # the spring's pace (its offset: the jump and what was left of the loss's), no jump
     assert extra.max() < np.linalg.norm(jump + BIAS) * (af.BLEND_X / HALF_LIFE) / math.e / rate_hz
@@ -232,3 +235,20 @@ def test_short_gaps_on_a_dancers_knee_and_ankle():
         assert move["loss_added_ratio"] < 1.0, move
         assert move["return_added_ratio"] < 1.5, move
     assert max(m["loss_added_ratio"] for m in moves[False]) > 1.5, moves
+
+
+def test_short_gaps_on_another_dancers_knee_and_ankle_come_back_without_a_twitch():
+    """dance1, the left knee and ankle hidden 0.1 s in every 0.5 s, the studio options: where the markers go
+    and where they come back the fill adds under 1.5x the joints' normal step. Until stop 24 the returns
+    added 1.73x / 1.82x: the output went on at the fill's last step, and the pose memory's recall shook with
+    the pelvis frame's skin markers (now 1.47x / 1.38x)."""
+    rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance1")
+    prof = load_profile("dance28")
+    pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
+    landmarks = pipe.landmark_map.apply(rec.positions)
+    reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
+    run_ = gap_run(landmarks, reference, prof, ["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, "ccd", True,
+                   "markers", fill_options=BEYOND_THESIS, pose_memory=True, short_gaps=(6, 30), rate_hz=rec.rate_hz)
+    assert (np.nanmean(run_.error_m, axis=0) < 0.013).all(), np.nanmean(run_.error_m, axis=0)
+    for move in transition_moves(run_, reference):
+        assert move["loss_added_ratio"] < 1.5 and move["return_added_ratio"] < 1.5, move
