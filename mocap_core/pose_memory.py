@@ -57,14 +57,16 @@ SMOOTHING = 0.2
 # The pelvis frame the poses are kept in and recalled from comes from three skin markers (the ASIS and the
 # sacrum), and its turn from one frame to the next changes by 0.3-0.4 deg (median) and 1.3-2.7 deg (95th
 # percentile) on the dance set, up to 13. 0.45 m down the leg a degree is 8 mm, and where one hip marker
-# slipped (dance1 at 22.6 s) the recalled knee moved 27 mm in a frame, the true one 10. An alpha-beta tracker
-# of the axes (Benedict-Bordner: the turn's gain is PELVIS_GAIN^2 / (2 - PELVIS_GAIN)) follows a steady turn
-# without lag and takes PELVIS_GAIN of a one-frame slip: the changes of its turn are half as large at the
-# 95th percentile (dance1 1.26 -> 0.76 deg, dance2 2.52 -> 1.26, walk1 2.74 -> 1.17), and it stays within
-# 0.3 deg of the raw axes (median; 0.7-0.9 at the 95th percentile). Knee+ankle hidden 0.1 s in every 0.5 s on dance1
-# (the blend at return going on with the output's own step, analytic_fill): the largest move the fill adds
-# at return 1.62x / 1.52x the normal step -> 1.47x / 1.37x, at loss 1.46x -> 1.47x; the means within 0.3 mm
-# on every dance-set leg, short gaps and long. Gains of 0.5-0.7 did as well; 0.3 took the knee's loss to 1.64x.
+# slipped (dance1 at 22.6 s) the recalled knee moved 27 mm in a frame, the true one 10; on dance2 at 19.0 s the
+# right ASIS slipped 127 mm, taking the frame's origin 63 mm. An alpha-beta tracker of the frame, axes and
+# origin (Benedict-Bordner: the gain of the turn and of the origin's step is PELVIS_GAIN^2 / (2 - PELVIS_GAIN)),
+# follows a steady motion without lag and takes PELVIS_GAIN of a one-frame slip: the changes of its turn are
+# half as large at the 95th percentile (dance1 1.26 -> 0.76 deg, dance2 2.52 -> 1.26, walk1 2.74 -> 1.17), and
+# its axes stay within 0.3 deg of the raw ones (median; 0.7-0.9 at the 95th percentile). Knee+ankle hidden
+# 0.1 s in every 0.5 s on dance1 (the blend at return going on with the output's own step, analytic_fill): the
+# largest move the fill adds at return 1.62x / 1.52x the normal step -> 1.47x / 1.38x with the axes tracked,
+# 1.33x / 1.38x with the origin too; at loss 1.46x -> 1.46x. The means within 0.3 mm on every dance-set leg,
+# short gaps and long. Gains of 0.5-0.7 did as well (the axes alone); 0.3 took the knee's loss to 1.64x.
 PELVIS_GAIN = 0.6
 PELVIS_TURN_GAIN = PELVIS_GAIN ** 2 / (2.0 - PELVIS_GAIN)
 PELVIS_RESET_RAD = 0.35  # 20 deg away from where the tracker expected it
@@ -101,8 +103,8 @@ class PoseMemory:
         self.last_seen = np.full((n, width, 3), np.nan)      # the targets of the last frame seen whole
         self.estimate = np.full((n, width, 3), np.nan)       # the smoothed targets during a gap (NaN: none)
         self._nothing_filled: np.ndarray | None = None
-        self.pelvis = np.zeros((3, 3))                       # the tracked pelvis frame's axes (track_pelvis)
-        self.pelvis_turn = np.zeros(4)                       # its turn per frame, and 1 while tracking
+        self.pelvis_axes = np.zeros((3, 3))                  # the tracked pelvis frame (track_pelvis): its axes,
+        self.pelvis_motion = np.zeros((4, 3))                # origin, step, turn per frame, and tracking or not
 
     def fill(self, landmarks: np.ndarray, filled: np.ndarray | None = None) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost; ``filled``: the landmarks an
@@ -114,7 +116,7 @@ class PoseMemory:
         out = np.zeros(len(landmarks), np.bool_)
         if len(self.legs):
             fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.toes, self.offsets, self.state,
-                       self.last_kept, self.last_seen, self.estimate, out, self.pelvis, self.pelvis_turn)
+                       self.last_kept, self.last_seen, self.estimate, out, self.pelvis_axes, self.pelvis_motion)
         return out
 
     def fill_landmarks(self, landmarks: np.ndarray, filled: np.ndarray | None = None
@@ -145,35 +147,41 @@ def pelvis_frame(lm, origin, rot):
     return True
 
 
-@njit(cache=True)
-def track_pelvis(rot, pelvis, turn):
-    """The pelvis frame's axes ``rot``, replaced by those of an alpha-beta tracker (``pelvis``, and
-    ``turn``: its turn per frame, in its own axes, then 1 once tracking). A steady turn is followed
-    without lag; a hip marker's one-frame slip moves the axes by PELVIS_GAIN of it."""
-    if turn[3] == 0.0:
-        pelvis[:] = rot
-        turn[:] = 0.0
-        turn[3] = 1.0
-        return
-    predicted = turned_by(pelvis, turn[:3])
-    miss = rotation_vector(mm(predicted.T.copy(), rot))
-    if vnorm(miss) > PELVIS_RESET_RAD:  # a real jolt (or a relabelled marker): start again from it
-        pelvis[:] = rot
-        turn[:3] = 0.0
-        return
-    pelvis[:] = turned_by(predicted, PELVIS_GAIN * miss)
-    turn[:3] += PELVIS_TURN_GAIN * miss
-    rot[:] = pelvis
+ORIGIN, STEP, TURN, TRACKING = range(4)  # the rows of PoseMemory.pelvis_motion
 
 
 @njit(cache=True)
-def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_kept, last_seen, estimate, out, pelvis,
-               turn):
+def track_pelvis(origin, rot, axes, motion):
+    """The pelvis frame (``origin``, axes ``rot``), replaced by an alpha-beta tracker's (``axes``, and
+    ``motion``'s rows ORIGIN ... TRACKING: the origin, its step, the axes' turn per frame in their own
+    axes, and 1 once tracking). A steady motion is followed without lag; a hip marker's one-frame slip
+    moves the frame by PELVIS_GAIN of it."""
+    if motion[TRACKING, 0] != 0.0:
+        predicted = turned_by(axes, motion[TURN])
+        miss = rotation_vector(mm(predicted.T.copy(), rot))
+        if vnorm(miss) <= PELVIS_RESET_RAD:  # (past it, a real jolt or a relabelled marker: start again)
+            axes[:] = turned_by(predicted, PELVIS_GAIN * miss)
+            motion[TURN] += PELVIS_TURN_GAIN * miss
+            rot[:] = axes
+            shift = origin - (motion[ORIGIN] + motion[STEP])
+            motion[ORIGIN] += motion[STEP] + PELVIS_GAIN * shift
+            motion[STEP] += PELVIS_TURN_GAIN * shift
+            origin[:] = motion[ORIGIN]
+            return
+    axes[:] = rot
+    motion[:] = 0.0
+    motion[ORIGIN] = origin
+    motion[TRACKING, 0] = 1.0
+
+
+@njit(cache=True)
+def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_kept, last_seen, estimate, out,
+               pelvis_axes, pelvis_motion):
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
-        turn[3] = 0.0
+        pelvis_motion[TRACKING, 0] = 0.0
         return
-    track_pelvis(rot, pelvis, turn)
+    track_pelvis(origin, rot, pelvis_axes, pelvis_motion)
     best_d, best_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
     other_d, other_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
     flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)

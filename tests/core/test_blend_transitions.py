@@ -216,8 +216,9 @@ def test_a_fill_that_missed_where_the_markers_came_back_is_trusted_later_after_a
 def test_short_gaps_on_a_dancers_knee_and_ankle():
     """dance2, the left knee and ankle hidden 0.1 s in every 0.5 s: the pose memory's fill misses the
     returning markers by 42 mm, so after a loss the output stays on the markers' course longer. With the
-    studio options: 11.1 / 10.4 mm mean (17.9 / 17.8 with the blend's spring alone), and the fill adds at
-    most 0.65x the joints' normal step where the markers go (1.63x)."""
+    studio options: 11.1 / 10.5 mm mean (18.0 / 18.0 with the blend's spring alone), and the fill adds at
+    most 0.65x the joints' normal step where the markers go (1.01x; 1.63x before the pose memory tracked the
+    pelvis frame)."""
     rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance2")
     prof = load_profile("dance28")
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
@@ -234,7 +235,8 @@ def test_short_gaps_on_a_dancers_knee_and_ankle():
     for move in moves[True]:
         assert move["loss_added_ratio"] < 1.0, move
         assert move["return_added_ratio"] < 1.5, move
-    assert max(m["loss_added_ratio"] for m in moves[False]) > 1.5, moves
+    loss = {course: max(m["loss_added_ratio"] for m in moves[course]) for course in moves}
+    assert loss[True] < 0.8 * loss[False], loss
 
 
 def test_short_gaps_on_another_dancers_knee_and_ankle_come_back_without_a_twitch():

@@ -135,28 +135,32 @@ def test_walk1_knee_and_ankle_from_a_memory_of_two_seconds():
     assert knee < 0.5 * knee0 and ankle < 0.7 * ankle0, (knee, ankle, knee0, ankle0)
 
 
-def test_the_pelvis_tracker_follows_a_steady_turn_and_takes_part_of_a_slip_known_answer():
-    """track_pelvis: after a steady turn of 3 degrees a frame it has no lag; a one-frame slip of a hip
-    marker that tilts the raw axes by 2 degrees moves it by PELVIS_GAIN of that, then it returns."""
-    pelvis, turn = np.zeros((3, 3)), np.zeros(4)
-    step = np.radians(3.0)
+def test_the_pelvis_tracker_follows_a_steady_motion_and_takes_part_of_a_slip_known_answer():
+    """track_pelvis: after a steady turn of 3 degrees a frame and a steady walk of 20 mm a frame it has no
+    lag; a one-frame slip of a hip marker that tilts the raw axes by 2 degrees and moves the origin 30 mm
+    moves it by PELVIS_GAIN of that, and then it comes back."""
+    axes, motion = np.zeros((3, 3)), np.zeros((4, 3))
+    turn, walk = np.radians(3.0), np.array([0.02, 0.0, 0.0])
+
+    def tracked(f, tilt=np.zeros(3), shove=np.zeros(3)):
+        rot, origin = _rotation_z(turn * f) @ turned_by(np.eye(3), tilt), walk * f + shove
+        track_pelvis(origin, rot, axes, motion)
+        return origin, rot
+
     for f in range(60):
-        raw = _rotation_z(step * f)
-        tracked = raw.copy()
-        track_pelvis(tracked, pelvis, turn)
-    np.testing.assert_allclose(tracked, raw, atol=1e-9)
-    np.testing.assert_allclose(rotation_vector(turned_by(np.eye(3), np.array([0.0, 0.0, step]))), [0.0, 0.0, step], atol=1e-12)
-    slip = np.radians(2.0)
-    steady = _rotation_z(step * 60)
-    raw = steady @ turned_by(np.eye(3), np.array([slip, 0.0, 0.0]))
-    tracked = raw.copy()
-    track_pelvis(tracked, pelvis, turn)
-    np.testing.assert_allclose(rotation_vector(steady.T @ tracked), [PELVIS_GAIN * slip, 0.0, 0.0], atol=1e-9)
-    for f in range(61, 121):  # the slip gone, the steady turn again
-        raw = _rotation_z(step * f)
-        tracked = raw.copy()
-        track_pelvis(tracked, pelvis, turn)
-    np.testing.assert_allclose(tracked, raw, atol=1e-6)
+        origin, rot = tracked(f)
+    np.testing.assert_allclose(rot, _rotation_z(turn * 59), atol=1e-9)
+    np.testing.assert_allclose(origin, walk * 59, atol=1e-9)
+    tilt, shove = np.array([np.radians(2.0), 0.0, 0.0]), np.array([0.0, 0.03, 0.0])
+    origin, rot = tracked(60, tilt, shove)
+    np.testing.assert_allclose(rotation_vector(_rotation_z(turn * 60).T @ rot), PELVIS_GAIN * tilt, atol=1e-9)
+    np.testing.assert_allclose(origin, walk * 60 + PELVIS_GAIN * shove, atol=1e-9)
+    for f in range(61, 121):  # the slip gone, the steady motion again
+        origin, rot = tracked(f)
+    np.testing.assert_allclose(rot, _rotation_z(turn * 120), atol=1e-6)
+    np.testing.assert_allclose(origin, walk * 120, atol=1e-6)
+    np.testing.assert_allclose(rotation_vector(turned_by(np.eye(3), np.array([0.0, 0.0, turn]))), [0.0, 0.0, turn],
+                               atol=1e-12)
 
 
 def test_the_tracked_pelvis_turns_more_steadily_on_a_dancer():
@@ -164,13 +168,13 @@ def test_the_tracked_pelvis_turns_more_steadily_on_a_dancer():
     2.5 degrees at the 95th percentile, and about half that tracked, which stays near the raw axes."""
     rec = read_recording(data_file(DANCE), "dance2")
     lm = SkeletonPipeline(load_profile("dance28"), rec.labels, fill_gaps=False).landmark_map.apply(rec.positions)
-    pelvis, turn, origin = np.zeros((3, 3)), np.zeros(4), np.empty(3)
+    axes, motion, origin = np.zeros((3, 3)), np.zeros((4, 3)), np.empty(3)
     raw, tracked = [], []
     for frame in lm:
         rot = np.empty((3, 3))
         assert pelvis_frame(frame, origin, rot)
         raw.append(rot.copy())
-        track_pelvis(rot, pelvis, turn)
+        track_pelvis(origin, rot, axes, motion)
         tracked.append(rot)
 
     def turns(axes):
