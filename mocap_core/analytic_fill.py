@@ -389,8 +389,8 @@ class BlendState:
 
     def blend(self, positions, status, idx) -> None:
         blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
-                          self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel, self.course,
-                          self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
+                          self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
+                          self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
                           self.frame_s, self.course_on)
 
 

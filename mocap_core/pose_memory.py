@@ -5,7 +5,8 @@ marker set has none: the 28-marker dance set puts one marker on the knee, one on
 on the toes, so with knee and ankle lost only the pelvis and the toe remain, and two degrees of
 freedom (the knee's bend direction, the ankle's angle) are not observed at all. What is left is
 what the actor has done before: while a leg is seen whole, its knee and ankle landmarks are
-remembered in the pelvis's frame, together with where the toe was. Once they are lost (and the toe
+remembered in the pelvis's frame (tracked, so that its skin markers' shake stays out: track_pelvis),
+together with where the toe was. Once they are lost (and the toe
 and the pelvis are seen), they are put where the remembered poses whose toe was nearest had them
 (inverse-distance weighted mean), smoothed over frames, starting from the last pose seen so that
 nothing jumps when the markers go. The ankle goes as far from the toe as it was in those poses (the
@@ -65,7 +66,7 @@ SMOOTHING = 0.2
 # its axes stay within 0.3 deg of the raw ones (median; 0.7-0.9 at the 95th percentile). Knee+ankle hidden
 # 0.1 s in every 0.5 s on dance1 (the blend at return going on with the output's own step, analytic_fill): the
 # largest move the fill adds at return 1.62x / 1.52x the normal step -> 1.47x / 1.38x with the axes tracked,
-# 1.33x / 1.38x with the origin too; at loss 1.46x -> 1.46x. The means within 0.3 mm on every dance-set leg,
+# 1.33x / 1.38x with the origin too; at loss 1.46x -> 1.46x. The means within 0.8 mm on every dance-set leg,
 # short gaps and long. Gains of 0.5-0.7 did as well (the axes alone); 0.3 took the knee's loss to 1.64x.
 PELVIS_GAIN = 0.6
 PELVIS_TURN_GAIN = PELVIS_GAIN ** 2 / (2.0 - PELVIS_GAIN)

@@ -243,7 +243,7 @@ def test_short_gaps_on_another_dancers_knee_and_ankle_come_back_without_a_twitch
     """dance1, the left knee and ankle hidden 0.1 s in every 0.5 s, the studio options: where the markers go
     and where they come back the fill adds under 1.5x the joints' normal step. Until stop 24 the returns
     added 1.73x / 1.82x: the output went on at the fill's last step, and the pose memory's recall shook with
-    the pelvis frame's skin markers (now 1.47x / 1.38x)."""
+    the pelvis frame's skin markers (now 1.33x / 1.38x)."""
     rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance1")
     prof = load_profile("dance28")
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
