@@ -24,6 +24,10 @@ def studio(tmp_path, frames, solver="ccd"):
             node["params"]["path"] = str(tmp_path / "solved.csv")
         if node["id"] == "viewer":
             node["params"]["port"] = 0
+        if node["id"] == "retarget":
+            # every frame, not the live latency policy: on a shared 2-core host with 11 processes, the retarget
+            # node can be starved past its 20 ms wait for a torso and drop that frame's limbs (seen once in CI)
+            node.setdefault("params", {})["max_wait_ms"] = 2000
     return yaml.safe_dump(lf)
 
 
