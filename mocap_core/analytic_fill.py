@@ -506,15 +506,14 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     says, which learns from the joint how fast its markers turn and how far its fill missed them where
     they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
     stop 23). Markers that come back while the output is still leaving that course are met from the
-    output as it went (its own last step), not as the fill went. An estimate that leaves its
-    course faster than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met
-    the same way; one handed between fills (estimated, held) without such a jump is not. A flickering
-    marker swings the offset back and forth by the two sources' difference: nothing builds up.
+    output as it went (its own last step), not as the fill went. An estimate that leaves its course faster
+    than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way;
+    one handed between fills (estimated, held) without such a jump is not. A flickering marker swings the
+    offset back and forth by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
-    ``raw_vel``, the source's last position and step; ``seen_raw`` and
-    ``seen_age``, the last position of each kind of source (0 markers, 1 a fill) and frames since;
-    ``course``, ``course_step``, ``since_loss`` and ``eased``, the markers' course after a loss and how far
-    the output has left it."""
+    ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
+    (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
+    markers' course after a loss and how far the output has left it."""
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
     for k in range(n):

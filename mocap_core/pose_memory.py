@@ -6,10 +6,9 @@ on the toes, so with knee and ankle lost only the pelvis and the toe remain, and
 freedom (the knee's bend direction, the ankle's angle) are not observed at all. What is left is
 what the actor has done before: while a leg is seen whole, its knee and ankle landmarks are
 remembered in the pelvis's frame (tracked, so that its skin markers' shake stays out: track_pelvis),
-together with where the toe was. Once they are lost (and the toe
-and the pelvis are seen), they are put where the remembered poses whose toe was nearest had them
-(inverse-distance weighted mean), smoothed over frames, starting from the last pose seen so that
-nothing jumps when the markers go. The ankle goes as far from the toe as it was in those poses (the
+together with where the toe was. Once they are lost (and the toe and the pelvis are seen), they are
+put where the remembered poses whose toe was nearest had them (inverse-distance weighted mean),
+smoothed over frames, starting from the last pose seen so that nothing jumps when the markers go. The ankle goes as far from the toe as it was in those poses (the
 foot keeps it near the toe); the knee goes where they had it in the pelvis's frame (the thigh keeps
 it near the hip), moved by 30 % of how far the toe is from theirs (TOE_SHARE). On dance1 the knee
 in the pelvis's frame alone was 43 mm off, with 30 % of the toe's offset 28 mm.
