@@ -8,10 +8,11 @@ what the actor has done before: while a leg is seen whole, its knee and ankle la
 remembered in the pelvis's frame (tracked, so that its skin markers' shake stays out: track_pelvis),
 together with where the toe was. Once they are lost (and the toe and the pelvis are seen), they are
 put where the remembered poses whose toe was nearest had them (inverse-distance weighted mean),
-smoothed over frames, starting from the last pose seen so that nothing jumps when the markers go. The ankle goes as far from the toe as it was in those poses (the
-foot keeps it near the toe); the knee goes where they had it in the pelvis's frame (the thigh keeps
-it near the hip), moved by 30 % of how far the toe is from theirs (TOE_SHARE). On dance1 the knee
-in the pelvis's frame alone was 43 mm off, with 30 % of the toe's offset 28 mm.
+smoothed over frames, starting from the last pose seen so that nothing jumps when the markers go.
+The ankle goes as far from the toe as it was in those poses (the foot keeps it near the toe); the
+knee goes where they had it in the pelvis's frame (the thigh keeps it near the hip), moved by 30 % of
+how far the toe is from theirs (TOE_SHARE). On dance1 the knee in the pelvis's frame alone was 43 mm
+off, with 30 % of the toe's offset 28 mm.
 
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 pose of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
