@@ -20,7 +20,7 @@ class LandmarkFills:
     def __init__(self, rebuild: bool, pose_memory: bool, tracking_of: Sequence[str] = (),
                  present: Iterable[str] = ()):
         self.rebuilder = SegmentRebuilder(tracking_of) if rebuild else None
-        self.memory = PoseMemory(present) if pose_memory else None
+        self.memory = PoseMemory(present, tracking_of) if pose_memory else None
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray | None:
         """One frame, in place; the mask of the landmarks filled, or None when no fill is on."""
@@ -28,7 +28,7 @@ class LandmarkFills:
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
-            recalled = self.memory.fill(landmarks, filled)
+            recalled = self.memory.fill(landmarks, filled, tracking)
             filled = recalled if filled is None else filled | recalled
         return filled
 
@@ -41,6 +41,6 @@ class LandmarkFills:
                 tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
             landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking)
         if self.memory is not None:
-            landmarks, recalled = self.memory.fill_landmarks(landmarks, filled)
+            landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking)
             filled = recalled if filled is None else filled | recalled
         return landmarks, filled

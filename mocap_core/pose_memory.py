@@ -14,6 +14,12 @@ knee goes where they had it in the pelvis's frame (the thigh keeps it near the h
 how far the toe is from theirs (TOE_SHARE). On dance1 the knee in the pelvis's frame alone was 43 mm
 off, with 30 % of the toe's offset 28 mm.
 
+Where the profile names the foot's two toe markers one by one (its ``tracking`` markers of the foot:
+the dance set's big-toe and little-toe markers, whose mean is the toe), the line between them tells
+how the foot is turned, which the toe's place alone does not: the ankle's offset from the toe in each
+remembered pose is turned as its foot's line is turned now (foot_line). Unless the two markers have
+come apart from their learned spacing: then a marker is wrong, and the offsets are taken as they were.
+
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 pose of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
 leg what the other did before). Always pooled, they made the walks worse (the two legs' markers
@@ -26,13 +32,13 @@ learns from the frames before a gap) and never learns from landmarks that were t
 """
 from __future__ import annotations
 
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import mm, mtv, mv, rotation_vector, turned_by, vfinite, vnorm
-from mocap_core.profiles import LANDMARK_INDEX
+from mocap_core.ik.kernels import mm, mtv, mv, rotation_between, rotation_vector, turned_by, vfinite, vnorm
+from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 from mocap_core.remembered_poses import CAPACITY, keep, nearest  # poses a leg; a pose kept per 5 mm of the toe
 
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
@@ -71,6 +77,21 @@ SMOOTHING = 0.2
 PELVIS_GAIN = 0.6
 PELVIS_TURN_GAIN = PELVIS_GAIN ** 2 / (2.0 - PELVIS_GAIN)
 PELVIS_RESET_RAD = 0.35  # 20 deg away from where the tracker expected it
+# The foot's line (its two toe markers, the profile's tracking markers of the foot: foot_line) turns the
+# ankle's offset from the toe: a remembered pose's foot may have pointed elsewhere with its toe in the same
+# place. Knee+ankle hidden 5-15 s (the walks from 2 s to the end), the ankle joint's mean: dance1 right
+# 26.6 -> 15.4 mm, dance2 left 53.8 -> 40.5, walk1 left 33.5 -> 26.3, better on all eight legs (the knees
+# within 3 mm either way; the sixteen means 661 -> 602). Tried: the knee's offset from the toe turned too
+# (786), or shifted by 0.3 of the ankle's turn (594, but dance2 right's knee 35 -> 39); the foot's line in
+# the key (the ankle no better, the knee worse: dance1 left 25 -> 31 mm, prototype).
+FOOT_WIDTH_TOLERANCE = 0.2  # the toe markers' spacing off its learned value by more than this share: not used
+FOOT_WIDTH_RATE = 1 / 100   # how fast the learned spacing follows the frames where the leg is seen whole
+# ... and used only once the spacing has held for this many frames (1/3 s at 60 Hz). Where dance1's left toe
+# markers come apart (6-14 s) they are right again for 3 frames at 6.05 s: the ankle turned with them and then,
+# the spacing gone, not, and at the return 0.1 s later it moved 2.11x its normal step (knee+ankle hidden 0.1 s
+# in every 0.5 s; 1.38x with the toe's line unused). Held 3 / 6 / 12 / 20 / 30 frames: 1.69 / 1.53 / 1.49 /
+# 1.47 / 1.43x; the sixteen long-gap means 598-602 mm throughout.
+FOOT_SOUND_FRAMES = 20
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
 
 
@@ -78,7 +99,7 @@ class PoseMemory:
     """Fills lost knee and ankle landmarks frame by frame. Keep one per actor: it owns the poses.
     ``present``: the landmark names the profile has (LandmarkMap.present())."""
 
-    def __init__(self, present: Iterable[str]):
+    def __init__(self, present: Iterable[str], tracking_of: Sequence[str] = ()):
         present = set(present)
         width = len(TOE_SHARE)
         legs, share, kinds = [], [], []
@@ -90,6 +111,14 @@ class PoseMemory:
                 share.append([TOE_SHARE[t] for t in targets] + [0.0] * (width - len(targets)))
                 kinds.append(targets)
         n = len(legs)
+        # per leg, its foot's first two tracking markers (the toe's line; -1: none)
+        self.n_tracking = len(tracking_of)
+        self.foot = np.full((n, 2), -1, np.int64)
+        for g, targets in enumerate(kinds):
+            side = LANDMARKS[legs[g][0]][0]
+            on_foot = [j for j, seg in enumerate(tracking_of) if seg == f"{side}_foot"]
+            if len(on_foot) >= 2:
+                self.foot[g] = on_foot[:2]
         # per leg: toe, heel, number of targets, the targets (-1 padding); each target's toe share
         self.legs = np.array(legs, np.int64).reshape(n, 3 + width)
         self.toe_share = np.array(share, np.float64).reshape(n, width)
@@ -98,35 +127,49 @@ class PoseMemory:
         self.mirror = np.array([1, 0] if same else [-1] * n, np.int64)
         # per leg, its own poses [0] and the other leg's, mirrored [1]:
         self.toes = np.full((n, 2, CAPACITY, 3), np.inf)      # remembered toe positions (pelvis frame)
-        self.offsets = np.zeros((n, 2, CAPACITY, width, 3))  # and the targets then (pelvis frame)
+        # and the targets then, and last the foot's line (unit; zero: not known), in the pelvis frame
+        self.offsets = np.zeros((n, 2, CAPACITY, width + 1, 3))
         self.state = np.zeros((n, 2, 2), np.int64)           # poses kept, where the next one goes
         self.last_kept = np.full((n, 2, 3), np.inf)          # the toe of the last pose kept
         self.last_seen = np.full((n, width, 3), np.nan)      # the targets of the last frame seen whole
         self.estimate = np.full((n, width, 3), np.nan)       # the smoothed targets during a gap (NaN: none)
+        self.foot_width = np.full(n, np.nan)                 # the learned spacing of the foot's toe markers
+        self.foot_sound = np.zeros(n, np.int64)              # and for how many frames it has held
         self._nothing_filled: np.ndarray | None = None
+        self._no_tracking = np.zeros((0, 3))
         self.pelvis_axes = np.zeros((3, 3))                  # the tracked pelvis frame (track_pelvis): its axes,
         self.pelvis_motion = np.zeros((4, 3))                # origin, step, turn per frame, and tracking or not
 
-    def fill(self, landmarks: np.ndarray, filled: np.ndarray | None = None) -> np.ndarray:
+    def fill(self, landmarks: np.ndarray, filled: np.ndarray | None = None,
+             tracking: np.ndarray | None = None) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost; ``filled``: the landmarks an
-        earlier stage estimated this frame (never learned from). Fills in place; returns the mask it filled."""
+        earlier stage estimated this frame (never learned from); ``tracking``: the profile's tracking
+        markers (n_tracking, 3; None: all lost). Fills in place; returns the mask it filled."""
         if filled is None:
             if self._nothing_filled is None or len(self._nothing_filled) != len(landmarks):
                 self._nothing_filled = np.zeros(len(landmarks), np.bool_)
             filled = self._nothing_filled
         out = np.zeros(len(landmarks), np.bool_)
+        if tracking is None or len(tracking) != self.n_tracking:
+            tracking = self._no_tracking
+            foot = np.full_like(self.foot, -1)
+        else:
+            tracking, foot = np.asarray(tracking, np.float64), self.foot
         if len(self.legs):
             fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.toes, self.offsets, self.state,
-                       self.last_kept, self.last_seen, self.estimate, out, self.pelvis_axes, self.pelvis_motion)
+                       self.last_kept, self.last_seen, self.estimate, out, self.pelvis_axes, self.pelvis_motion,
+                       tracking, foot, self.foot_width, self.foot_sound)
         return out
 
-    def fill_landmarks(self, landmarks: np.ndarray, filled: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
-        """Landmark frames (F, n_landmarks, 3) -> filled copy and the (F, n_landmarks) mask filled here."""
+    def fill_landmarks(self, landmarks: np.ndarray, filled: np.ndarray | None = None,
+                       tracking: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Landmark frames (F, n_landmarks, 3) -> filled copy and the (F, n_landmarks) mask filled here;
+        ``tracking``: the tracking markers of the same frames (F, n_tracking, 3)."""
         out = np.array(landmarks, dtype=np.float64, copy=True)
         mask = np.zeros(out.shape[:2], bool)
         for f in range(out.shape[0]):
-            mask[f] = self.fill(out[f], None if filled is None else filled[f])
+            mask[f] = self.fill(out[f], None if filled is None else filled[f],
+                                None if tracking is None else tracking[f])
         return out, mask
 
 
@@ -176,8 +219,23 @@ def track_pelvis(origin, rot, axes, motion):
 
 
 @njit(cache=True)
+def foot_line(tracking, pair, rot, learned):
+    """The foot's line (unit, in the pelvis frame ``rot``) from its two toe markers ``pair`` of
+    ``tracking``, and their spacing; zero and NaN when one is lost or the spacing is off the ``learned``
+    one by more than FOOT_WIDTH_TOLERANCE (a marker is then wrong)."""
+    line = np.zeros(3)
+    if pair[0] < 0 or not (vfinite(tracking[pair[0]]) and vfinite(tracking[pair[1]])):
+        return line, np.nan
+    d = tracking[pair[1]] - tracking[pair[0]]
+    width = vnorm(d)
+    if width < 1e-6 or (learned == learned and abs(width - learned) > FOOT_WIDTH_TOLERANCE * learned):
+        return line, np.nan
+    return mtv(rot, d / width), width
+
+
+@njit(cache=True)
 def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_kept, last_seen, estimate, out,
-               pelvis_axes, pelvis_motion):
+               pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound):
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
         pelvis_motion[TRACKING, 0] = 0.0
@@ -186,7 +244,8 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
     best_d, best_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
     other_d, other_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
     flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
-    seen = np.empty((legs.shape[1] - 3, 3))
+    width = legs.shape[1] - 3
+    seen = np.zeros((width + 1, 3))  # the targets, then the foot's line
     for g in range(legs.shape[0]):
         key, heel, nt = legs[g, 0], legs[g, 1], legs[g, 2]
         toe = lm[key].copy()
@@ -194,6 +253,9 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
             estimate[g, 0, 0] = np.nan
             continue
         local_toe = mtv(rot, toe - origin)
+        line, spacing = foot_line(tracking, foot[g], rot, foot_width[g])
+        foot_sound[g] = foot_sound[g] + 1 if spacing == spacing else 0
+        line = line if foot_sound[g] >= FOOT_SOUND_FRAMES else np.zeros(3)
         lost, measured = False, not filled[key]
         for t in range(nt):
             lost = lost or not vfinite(lm[legs[g, 3 + t]])
@@ -204,11 +266,17 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
                 for t in range(nt):
                     seen[t] = mtv(rot, lm[legs[g, 3 + t]] - origin)
                     last_seen[g, t] = seen[t] - toe_share[g, t] * local_toe
-                keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, seen[:nt])
+                seen[width] = line
+                if spacing == spacing:
+                    if foot_width[g] == foot_width[g]:
+                        foot_width[g] += FOOT_WIDTH_RATE * (spacing - foot_width[g])
+                    else:
+                        foot_width[g] = spacing
+                keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, seen)
                 other = mirror[g]
                 if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
                     keep(toes[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
-                          local_toe * flip, seen[:nt] * flip)
+                          local_toe * flip, seen * flip)
             continue
         if state[g, 0, 0] < NEIGHBOURS:
             continue
@@ -220,16 +288,18 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
             nearest(toes[g, 1], state[g, 1, 0], local_toe, other_d, other_i)
             if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
                 best_d[:], best_i[:], source = other_d, other_i, 1
-        mean, mean_toe, total = np.zeros((nt, 3)), np.zeros(3), 0.0
+        # smoothed: the poses' targets less their share of their toe (this toe's is added after); a target
+        # kept as far from the toe as it was turned as the foot's line has turned since, when both are known
+        mean, total = np.zeros((nt, 3)), 0.0
         for n in range(NEIGHBOURS):
             w = 1.0 / (best_d[n] + 1e-3)
-            mean += w * offsets[g, source, best_i[n], :nt]
-            mean_toe += w * toes[g, source, best_i[n]]
+            pose, pose_toe = offsets[g, source, best_i[n]], toes[g, source, best_i[n]]
+            turn = rotation_between(pose[width], line)  # (the identity when either is zero)
+            for t in range(nt):
+                offset = pose[t] - toe_share[g, t] * pose_toe
+                mean[t] += w * (mv(turn, offset) if toe_share[g, t] == 1.0 else offset)
             total += w
         mean /= total
-        mean_toe /= total
-        for t in range(nt):  # smoothed: the poses' target less its share of their toe (this toe's is added after)
-            mean[t] -= toe_share[g, t] * mean_toe
         if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps
             if np.isnan(last_seen[g, 0, 0]):
                 estimate[g, :nt] = mean

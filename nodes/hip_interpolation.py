@@ -62,7 +62,7 @@ class HipInterpolation(Node):
         lm = self.map.apply(msg.positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
-        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if self.params.rebuild else None)
+        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions))
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:
