@@ -71,21 +71,22 @@ def rebuild_cost():
 
 
 def pose_memory_cost():
-    """The pose memory full (CAPACITY poses a leg) and one knee and ankle recalled in every frame."""
+    """The pose memory full (CAPACITY poses a leg) and one knee and ankle recalled in every frame, the
+    ankle turned with the toe markers' line (the profile's tracking markers)."""
     rec = read_recording(DATA / "13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat", "dance1")
     lmap = load_profile("dance28").resolve(rec.labels)
-    lm = lmap.apply(rec.positions)
-    memory = PoseMemory(lmap.present())
+    lm, tracking = lmap.apply(rec.positions), lmap.tracking(rec.positions)
+    memory = PoseMemory(lmap.present(), lmap.tracking_of)
     rng = np.random.default_rng(0)
     for f in range(CAPACITY + 100):  # the take's poses, jittered so that every one is kept
         frame = lm[f % len(lm)].copy()
         frame[LANDMARK_INDEX["L_FM2"]] += rng.normal(0, 0.01, 3)
-        memory.fill(frame)
+        memory.fill(frame, None, tracking[f % len(lm)])
     lost = lm.copy()
     lost[:, [LANDMARK_INDEX["L_FLE"], LANDMARK_INDEX["L_FAL"]]] = np.nan
     n = 300
-    seen = per_call_us(lambda i: memory.fill(lm[i].copy()), n)
-    recalled = per_call_us(lambda i: memory.fill(lost[i].copy()), n)
+    seen = per_call_us(lambda i: memory.fill(lm[i].copy(), None, tracking[i]), n)
+    recalled = per_call_us(lambda i: memory.fill(lost[i].copy(), None, tracking[i]), n)
     print(f"pose memory ({CAPACITY} poses a leg), us per frame: legs seen {seen:.1f}, "
           f"one leg's knee and ankle recalled {recalled:.1f}")
 
