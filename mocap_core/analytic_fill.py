@@ -414,6 +414,10 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     lost = s != LOCATED and was == LOCATED
     found_or_lost = (s == LOCATED) != (was == LOCATED)
     jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
+    # handed from one fill to another (estimated, held) without such a jump: the new fill's jump is taken into
+    # the offset too, but a course weight after a loss goes on (the Vicon take's right wrist, handed from held
+    # to estimated at frame 979, moved 73 mm in that frame, 2.11x its normal step; 0.31x with it)
+    handed = s != LOCATED and was != LOCATED and was != MISSING and s != was and not jumped
     spring_moved = 0.0
     trust[k, LOCATED_RUN] = trust[k, LOCATED_RUN] + 1 if s == LOCATED else 0
     if trust[k, LOCATED_RUN] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two markers' steps
@@ -423,6 +427,9 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         miss = vnorm(raw - (heading + offset[k]))
         trust[k, MISS_SQ] += miss * miss
         trust[k, MISS_N] += 1
+    if handed:
+        offset[k] -= raw - heading
+        offset_vel[k] = 0.0
     if was != MISSING and (found_or_lost or jumped):
         if since_loss[k] < math.inf:
             # the output left the spring's course for the markers': go on from it, at its own last step (the
@@ -435,7 +442,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         if found_or_lost and since <= FLICKER_FRAMES:
             _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, SOURCE_JUMP_M_S * dt)
     else:
-        if was != MISSING:
+        if was != MISSING and not handed:  # (a hand-over's jump is not the source's step)
             _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)
         before = offset[k].copy()
         spring = offset_vel[k] + omega * before
@@ -508,7 +515,8 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     stop 23). Markers that come back while the output is still leaving that course are met from the
     output as it went (its own last step), not as the fill went. An estimate that leaves its course faster
     than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way;
-    one handed between fills (estimated, held) without such a jump is not. A flickering marker swings the
+    one handed between fills (estimated, held) without such a jump has its jump taken into the offset, and
+    a course weight goes on through it (since stop 25; until then it was not met). A flickering marker swings the
     offset back and forth by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source

@@ -13,7 +13,7 @@ from mocap_core.recordings import read_recording
 from mocap_core.skeleton import Status
 from tests.conftest import data_file
 
-LOCATED, ESTIMATED = int(Status.LOCATED), int(Status.ESTIMATED)
+LOCATED, ESTIMATED, HELD = int(Status.LOCATED), int(Status.ESTIMATED), int(Status.HELD)
 VELOCITY = np.array([0.5, 0.0, 0.0])   # m/s, the joint's true motion: a straight line
 BIAS = np.array([0.0, 0.05, 0.0])      # the estimate is 50 mm off the truth while the markers are lost
 HALF_LIFE = 0.1
@@ -21,15 +21,15 @@ START = np.array([1.0, 2.0, 0.5])     # where the line starts (not the origin)
 
 
 def run(rate_hz: float, lost: range, half_life: float = HALF_LIFE, step: float = 0.0, frames: int = 80,
-        bias=lambda f: BIAS, velocity=VELOCITY, course: bool = True):
+        bias=lambda f: BIAS, velocity=VELOCITY, course: bool = True, fill=lambda f: ESTIMATED):
     """One joint moving along a line; in the ``lost`` frames its source is an estimate ``bias(frame)`` off
-    the truth. Returns the output and the truth, per frame."""
+    the truth, of status ``fill(frame)``. Returns the output and the truth, per frame."""
     blend = af.BlendState.empty(1, step, half_life, course)
     out, truth = [], []
     for f in range(frames):
         blend.advance_clock(f / rate_hz)
         true = START + velocity * f / rate_hz
-        status = np.array([ESTIMATED if f in lost else LOCATED], np.int64)
+        status = np.array([fill(f) if f in lost else LOCATED], np.int64)
         positions = (true + (bias(f) if f in lost else 0.0)).reshape(1, 3).copy()
         blend.blend(positions, status, np.array([0]))
         out.append(positions[0].copy())
@@ -118,6 +118,23 @@ def test_an_estimate_that_jumps_to_another_source_mid_gap_is_met_smoothly_known_
     # the spring's pace (its offset: the jump and what was left of the loss's), no jump
     assert extra.max() < np.linalg.norm(jump + BIAS) * (af.BLEND_X / HALF_LIFE) / math.e / rate_hz
     assert np.linalg.norm(out[-1] - truth[-1] - BIAS - jump) < 1e-4                   # then the new source
+
+
+def test_a_fill_handed_to_another_mid_gap_is_met_smoothly_known_answer():
+    """A held hand taken up by an estimate 60 mm away (7.2 m/s at 120 Hz, under SOURCE_JUMP_M_S; the Vicon
+    take's right wrist at frame 979): the hand-over's jump is eased in, where the same jump within one
+    fill is taken as the fill's own motion."""
+    rate_hz, hand_over = 120.0, 200
+    jump = np.array([0.0, 0.0, 0.06])
+    bias = lambda f: BIAS + (jump if f >= hand_over else 0.0)  # noqa: E731
+    out, truth = run(rate_hz, range(10, 10_000), bias=bias, frames=400,
+                     fill=lambda f: HELD if f < hand_over else ESTIMATED)
+    extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
+    assert extra[:hand_over - 1].max() < 0.1 * np.linalg.norm(jump)  # (the loss's own ease, long over)
+    assert extra[hand_over - 1:].max() < np.linalg.norm(jump) * (af.BLEND_X / HALF_LIFE) / math.e / rate_hz
+    assert np.linalg.norm(out[-1] - truth[-1] - BIAS - jump) < 1e-4  # then the new fill
+    same, _ = run(rate_hz, range(10, 10_000), bias=bias, frames=400)  # one fill throughout: its own motion
+    assert np.linalg.norm(np.diff(same, axis=0)[hand_over - 1] - np.diff(truth, axis=0)[hand_over - 1]) > 0.05
 
 
 def test_a_fast_estimate_is_followed_not_taken_for_a_jump():
