@@ -82,7 +82,7 @@ PELVIS_RESET_RAD = 0.35  # 20 deg away from where the tracker expected it
 # place. Knee+ankle hidden 5-15 s (the walks from 2 s to the end), the ankle joint's mean: dance1 right
 # 26.6 -> 15.4 mm, dance2 left 53.8 -> 40.5, walk1 left 33.5 -> 26.3, better on all eight legs (the knees
 # within 3 mm either way; the sixteen means 661 -> 602). Tried: the knee's offset from the toe turned too
-# (786), or shifted by 0.3 of the ankle's turn (594, but dance2 right's knee 35 -> 39); the foot's line in
+# (786 mm), or shifted by 0.3 of the ankle's turn (594, but dance2 right's knee 35 -> 39); the foot's line in
 # the key (the ankle no better, the knee worse: dance1 left 25 -> 31 mm, prototype).
 FOOT_WIDTH_TOLERANCE = 0.2  # the toe markers' spacing off its learned value by more than this share: not used
 FOOT_WIDTH_RATE = 1 / 100   # how fast the learned spacing follows the frames where the leg is seen whole
@@ -114,8 +114,8 @@ class PoseMemory:
         # per leg, its foot's first two tracking markers (the toe's line; -1: none)
         self.n_tracking = len(tracking_of)
         self.foot = np.full((n, 2), -1, np.int64)
-        for g, targets in enumerate(kinds):
-            side = LANDMARKS[legs[g][0]][0]
+        for g in range(n):
+            side = LANDMARKS[legs[g][0]][0]  # (the toe's landmark: "L_FM2")
             on_foot = [j for j, seg in enumerate(tracking_of) if seg == f"{side}_foot"]
             if len(on_foot) >= 2:
                 self.foot[g] = on_foot[:2]
@@ -136,7 +136,7 @@ class PoseMemory:
         self.foot_width = np.full(n, np.nan)                 # the learned spacing of the foot's toe markers
         self.foot_sound = np.zeros(n, np.int64)              # and for how many frames it has held
         self._nothing_filled: np.ndarray | None = None
-        self._no_tracking = np.zeros((0, 3))
+        self._no_tracking, self._no_foot = np.zeros((0, 3)), np.full_like(self.foot, -1)
         self.pelvis_axes = np.zeros((3, 3))                  # the tracked pelvis frame (track_pelvis): its axes,
         self.pelvis_motion = np.zeros((4, 3))                # origin, step, turn per frame, and tracking or not
 
@@ -151,8 +151,7 @@ class PoseMemory:
             filled = self._nothing_filled
         out = np.zeros(len(landmarks), np.bool_)
         if tracking is None or len(tracking) != self.n_tracking:
-            tracking = self._no_tracking
-            foot = np.full_like(self.foot, -1)
+            tracking, foot = self._no_tracking, self._no_foot
         else:
             tracking, foot = np.asarray(tracking, np.float64), self.foot
         if len(self.legs):
