@@ -37,7 +37,7 @@ from typing import Iterable, Sequence
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import mm, mtv, mv, rotation_between, rotation_vector, turned_by, vfinite, vnorm
+from mocap_core.ik.kernels import follow, mm, mtv, mv, rotation_between, rotation_vector, turned_by, vfinite, vnorm
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 from mocap_core.remembered_poses import CAPACITY, keep, nearest  # poses a leg; a pose kept per 5 mm of the toe
 
@@ -145,14 +145,16 @@ class PoseMemory:
              tracking: np.ndarray | None = None) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost; ``filled``: the landmarks an
         earlier stage estimated this frame (never learned from); ``tracking``: the profile's tracking
-        markers (n_tracking, 3; None: all lost). Fills in place; returns the mask it filled."""
+        markers (n_tracking, 3; None: none given). Fills in place; returns the mask it filled."""
         if filled is None:
             if self._nothing_filled is None or len(self._nothing_filled) != len(landmarks):
                 self._nothing_filled = np.zeros(len(landmarks), np.bool_)
             filled = self._nothing_filled
         out = np.zeros(len(landmarks), np.bool_)
-        if tracking is None or len(tracking) != self.n_tracking:
+        if tracking is None:
             tracking, foot = self._no_tracking, self._no_foot
+        elif len(tracking) != self.n_tracking:  # (as the segment rebuild: a caller's mistake, not bad input)
+            raise ValueError(f"expected {self.n_tracking} tracking markers, got {len(tracking)}")
         else:
             tracking, foot = np.asarray(tracking, np.float64), self.foot
         if len(self.legs):
@@ -268,10 +270,7 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
                     last_seen[g, t] = seen[t] - toe_share[g, t] * local_toe
                 seen[width] = line
                 if spacing == spacing:
-                    if foot_width[g] == foot_width[g]:
-                        foot_width[g] += FOOT_WIDTH_RATE * (spacing - foot_width[g])
-                    else:
-                        foot_width[g] = spacing
+                    foot_width[g] = follow(foot_width[g], spacing, FOOT_WIDTH_RATE)
                 keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, seen)
                 other = mirror[g]
                 if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
@@ -291,13 +290,16 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
         # smoothed: the poses' targets less their share of their toe (this toe's is added after); a target
         # kept as far from the toe as it was turned as the foot's line has turned since, when both are known
         mean, total = np.zeros((nt, 3)), 0.0
+        turning = vnorm(line) > 0.0  # (no line now: nothing to turn)
+        turn = np.eye(3)
         for n in range(NEIGHBOURS):
             w = 1.0 / (best_d[n] + 1e-3)
             pose, pose_toe = offsets[g, source, best_i[n]], toes[g, source, best_i[n]]
-            turn = rotation_between(pose[width], line)  # (the identity when either is zero)
+            if turning:  # (the identity when the pose had no line)
+                turn = rotation_between(pose[width], line)
             for t in range(nt):
                 offset = pose[t] - toe_share[g, t] * pose_toe
-                mean[t] += w * (mv(turn, offset) if toe_share[g, t] == 1.0 else offset)
+                mean[t] += w * (mv(turn, offset) if turning and toe_share[g, t] == 1.0 else offset)
             total += w
         mean /= total
         if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps

@@ -33,7 +33,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import mv, rigid_fit_first, rotation_between, vfinite
+from mocap_core.ik.kernels import follow, mv, rigid_fit_first, rotation_between, vfinite
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, TRACKING_BONES
 
 MIN_PARTNERS = 3
@@ -233,8 +233,7 @@ def _learn_distances(lm, seg, width, refined, seen, rebuilt, distance):
         for m in range(width):
             if m != k and seen[m] and not rebuilt[seg[m]]:
                 d = np.sqrt(((lm[seg[k]] - lm[seg[m]]) ** 2).sum())
-                old = distance[k, m]
-                distance[k, m] = d if np.isnan(old) else old + DISTANCE_RATE * (d - old)
+                distance[k, m] = follow(distance[k, m], d, DISTANCE_RATE)
 
 
 @njit(cache=True)

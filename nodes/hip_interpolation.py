@@ -55,14 +55,15 @@ class HipInterpolation(Node):
             # (new ones: what they learned was of the old marker set's landmarks)
             self.fills = LandmarkFills(self.params.rebuild, self.params.pose_memory, self.map.tracking_of,
                                        self.map.present())
-            if self.params.rebuild and self.map.absent_tracking:
-                self.log.warning("tracking markers %s of profile %s are not in the stream: rebuilt "
+            if (self.params.rebuild or self.params.pose_memory) and self.map.absent_tracking:
+                self.log.warning("tracking markers %s of profile %s are not in the stream: gaps filled "
                                  "without them", ", ".join(self.map.absent_tracking), self.profile.name)
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
         lm = self.map.apply(msg.positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
-        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions))
+        fills_on = self.params.rebuild or self.params.pose_memory  # (both read the tracking markers)
+        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if fills_on else None)
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

@@ -33,6 +33,13 @@ def vnorm(v):
 
 
 @njit(cache=True)
+def follow(learned, sample, rate):
+    """A learned value (a distance between two points on one bone) moved by ``rate`` towards a new
+    ``sample``; the sample itself while nothing is learned (NaN)."""
+    return sample if math.isnan(learned) else learned + rate * (sample - learned)
+
+
+@njit(cache=True)
 def vcross(a, b):
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
