@@ -225,8 +225,12 @@ class RealGapMoves:
     """How the filled joints of a solved take move, next to each joint's normal per-frame motion (the 95th
     percentile of its moves between two located frames): at every change of status between two frames
     where it has a position (a joint lost, found, or handed from one fill to another), and on every move
-    into or out of a filled (estimated or held) frame."""
+    into or out of a filled (estimated or held) frame. The actor's own fast moves are in both; at a change of
+    status ``paced`` leaves them out: the move over the larger of the normal motion and the joint's own pace
+    there (its moves between located frames nearest before and after the change, within PACE_WINDOW frames).
+    A twitch is a move faster than the joint moved on either side of it."""
     changes: np.ndarray     # move / normal at each change of status
+    paced: np.ndarray       # move / max(normal, the joint's own pace there) at each change of status
     filled: np.ndarray      # move / normal on each move into or out of a filled frame
     worst: list[tuple[float, str, int]]  # (move / normal, joint, frame) of the largest moves at a change
 
@@ -235,15 +239,29 @@ class RealGapMoves:
             return int((a > x).sum())
         return {"changes": len(self.changes), "changes_over_1_5": over(self.changes, 1.5),
                 "changes_max": float(self.changes.max()) if len(self.changes) else float("nan"),
+                "paced_over_1_5": over(self.paced, 1.5),
+                "paced_max": float(self.paced.max()) if len(self.paced) else float("nan"),
                 "filled_moves": len(self.filled), "filled_over_1_5": over(self.filled, 1.5),
                 "filled_over_3": over(self.filled, 3.0),
                 "filled_max": float(self.filled.max()) if len(self.filled) else float("nan")}
 
 
+PACE_WINDOW = 10  # frames either side of a change of status searched for the joint's own pace
+
+
+def _own_pace(step: np.ndarray, both: np.ndarray, change: int) -> float:
+    """The larger of the moves between located frames (``both``) nearest before and after the move ``change``
+    of ``step``, within PACE_WINDOW moves (0 when there is none)."""
+    before = np.flatnonzero(both[max(0, change - PACE_WINDOW):change])
+    after = np.flatnonzero(both[change + 1:change + 1 + PACE_WINDOW])
+    pace = step[max(0, change - PACE_WINDOW) + before[-1]] if len(before) else 0.0
+    return max(pace, step[change + 1 + after[0]]) if len(after) else pace
+
+
 def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int = 100) -> RealGapMoves:
     """``positions`` (F, joints, 3), ``status`` (F, joints) of a solved take. Joints located in fewer than
     ``min_located`` frames have no normal motion to compare with and are left out."""
-    changes, filled, worst = [], [], []
+    changes, paced, filled, worst = [], [], [], []
     filled_status = (int(Status.ESTIMATED), int(Status.HELD))
     for j, joint in enumerate(JOINTS):
         step = _steps(positions[:, j])
@@ -258,8 +276,10 @@ def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int =
         change = (status[1:, j] != status[:-1, j]) & seen[1:] & seen[:-1]
         near_fill = np.isin(status[1:, j], filled_status) | np.isin(status[:-1, j], filled_status)
         changes.append(step[change] / normal)
+        paced.append(np.array([step[c] / max(normal, _own_pace(step, both, c)) for c in np.flatnonzero(change)]))
         filled.append(step[near_fill & seen[1:] & seen[:-1]] / normal)
         worst += [(float(step[f] / normal), joint, int(f + 1)) for f in np.flatnonzero(change)]
     worst.sort(reverse=True)
     return RealGapMoves(np.concatenate(changes) if changes else np.zeros(0),
+                        np.concatenate(paced) if paced else np.zeros(0),
                         np.concatenate(filled) if filled else np.zeros(0), worst[:5])

@@ -76,6 +76,25 @@ def test_real_gap_moves_known_answer():
     assert len(moves.changes) == 1 and abs(moves.changes[0] - np.hypot(1, 10)) < 1e-6
     assert moves.worst[0][1:] == ("elbow_l", 200)
     assert len(moves.filled) == 200 and np.sum(moves.filled > 1.5) == 1
+    assert abs(moves.paced[0] - np.hypot(1, 10)) < 1e-6  # the joint moved 1 mm a frame on either side
+
+
+def test_real_gap_moves_leave_the_actors_own_pace_out():
+    """A joint that speeds up to 5 mm a frame (5x its normal 1 mm) is lost and found while it moves so, the
+    fill going on at that pace: over 1.5x its normal motion at both changes, but not beyond its own pace.
+    A second joint's fill jumps 8 mm at its return while it moves at 5 mm: 13 / 5 = 2.6x beyond its pace."""
+    frames = 400
+    positions = np.zeros((frames, N_JOINTS, 3))
+    status = np.full((frames, N_JOINTS), int(Status.LOCATED))
+    steps = np.where((np.arange(frames) > 290) & (np.arange(frames) < 310), 0.005, 0.001)
+    for joint in ("elbow_l", "knee_r"):
+        positions[:, INDEX[joint], 0] = np.cumsum(steps)
+        status[300:305, INDEX[joint]] = Status.ESTIMATED
+    positions[305:, INDEX["knee_r"], 0] += 0.008  # (the knee's fill lagged 8 mm behind: it jumps at the return)
+    moves = real_gap_moves(positions, status)
+    assert len(moves.changes) == 4 and np.sum(moves.changes > 1.5) == 4
+    assert np.sum(moves.paced > 1.5) == 1 and abs(moves.paced.max() - 13 / 5) < 1e-6
+    assert moves.row()["paced_over_1_5"] == 1
 
 
 def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
@@ -90,6 +109,9 @@ def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
     assert int(blend["changes"]) > 500
     assert int(blend["changes_over_1_5"]) * 5 < int(without["changes_over_1_5"]) < int(thesis["changes_over_1_5"])
     assert float(blend["changes_max"]) < 3 < float(without["changes_max"])
+    # beyond the joints' own pace (the actor's fast moves left out) the blend's few are gone, the others' stay
+    assert int(blend["paced_over_1_5"]) * 10 < int(without["paced_over_1_5"]) < int(thesis["paced_over_1_5"])
+    assert float(blend["paced_max"]) <= float(blend["changes_max"])
     assert int(blend["filled_over_3"]) < int(without["filled_over_3"])
     assert (tmp_path / "moves_at_changes.png").stat().st_size > 10_000
 
