@@ -1,7 +1,8 @@
-"""The landmark-level gap fills, in their order: the segment rebuild, then the pose memory.
+"""The landmark-level gap fills, in their order: the segment rebuild (with the leg hinge), then the
+pose memory.
 
-One place for how the two go together, used by the hip node, the offline pipeline and `mocap eval
-gaps`: the memory fills only what the rebuild could not, and never learns from what it rebuilt.
+One place for how they go together, used by the hip node, the offline pipeline and `mocap eval gaps`:
+each fills only what the ones before could not, and never learns from what they filled.
 """
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from mocap_core.leg_hinge import LegHinge
 from mocap_core.pose_memory import PoseMemory
 from mocap_core.segment_rebuild import SegmentRebuilder
 
@@ -20,6 +22,8 @@ class LandmarkFills:
     def __init__(self, rebuild: bool, pose_memory: bool, tracking_of: Sequence[str] = (),
                  present: Iterable[str] = ()):
         self.rebuilder = SegmentRebuilder(tracking_of) if rebuild else None
+        hinge = LegHinge(tracking_of) if rebuild else None
+        self.leg_hinge = hinge if hinge is not None and hinge.active else None
         self.memory = PoseMemory(present, tracking_of) if pose_memory else None
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray | None:
@@ -27,6 +31,8 @@ class LandmarkFills:
         filled = None
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking)
+        if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
+            filled |= self.leg_hinge.fill(landmarks, tracking)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
             recalled = self.memory.fill(landmarks, filled, tracking)
             filled = recalled if filled is None else filled | recalled
@@ -40,6 +46,9 @@ class LandmarkFills:
             if tracking is None and self.rebuilder.n_tracking:  # none given: the tracking markers are lost
                 tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
             landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking)
+        if self.leg_hinge is not None:
+            for f in range(len(landmarks)):
+                filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f])
         if self.memory is not None:
             landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking)
             filled = recalled if filled is None else filled | recalled

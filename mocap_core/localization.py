@@ -240,20 +240,30 @@ def _localize_batch(lms, pos, frames, status, body_used, body, sums, counts):
 
 
 @njit(cache=True)
-def _localize_frame(lm, pos, frames, used, body, sums, counts):
-    height_given, mass_given, marker_r = body[0], body[1], body[2]
-    elbow_off, knee_off, ankle_off = body[3] + marker_r, body[4] + marker_r, body[5] + marker_r
-
-    # pelvis and hips (thesis 3.4.1; Harrington et al. 2006 with the published +7.3 mm)
+def hip_centres(lm):
+    """The pelvis frame (columns: x left, y up, z forward) and the left and right hip joint centres, from
+    the ASIS and the sacrum (thesis 3.4.1; Harrington et al. 2006 with the published +7.3 mm); NaN when
+    one is lost."""
     sacr, lias, rias = lm[SACR], lm[L_IAS], lm[R_IAS]
     mid_asis = 0.5 * (lias + rias)
-    r_hip = _frame_yx(vcross(mid_asis - sacr, lias - rias), lias - rias)  # x left, y up, z forward
+    r_hip = _frame_yx(vcross(mid_asis - sacr, lias - rias), lias - rias)
     left, up, fwd = r_hip[:, 0].copy(), r_hip[:, 1].copy(), r_hip[:, 2].copy()
     pw = vnorm(lias - rias) * 1000
     pd = vnorm(mid_asis - sacr) * 1000
     lateral = (0.33 * pw + 7.3) / 1000
     down_back = (up * (-0.30 * pw - 10.9) + fwd * (-0.24 * pd - 9.9)) / 1000
-    hips = (mid_asis + left * lateral + down_back, mid_asis - left * lateral + down_back)
+    return r_hip, mid_asis + left * lateral + down_back, mid_asis - left * lateral + down_back
+
+
+@njit(cache=True)
+def _localize_frame(lm, pos, frames, used, body, sums, counts):
+    height_given, mass_given, marker_r = body[0], body[1], body[2]
+    elbow_off, knee_off, ankle_off = body[3] + marker_r, body[4] + marker_r, body[5] + marker_r
+
+    sacr, lias, rias = lm[SACR], lm[L_IAS], lm[R_IAS]
+    r_hip, left_hip, right_hip = hip_centres(lm)
+    left, up, fwd = r_hip[:, 0].copy(), r_hip[:, 1].copy(), r_hip[:, 2].copy()
+    hips = (left_hip, right_hip)
     pos[J_PELVIS] = 0.5 * (hips[0] + hips[1])
     frames[J_PELVIS] = r_hip
 

@@ -1,0 +1,150 @@
+"""Lost knee and ankle landmarks from the hip and one marker on the shank (beyond the thesis, part of
+the rebuild).
+
+The segment rebuild (mocap_core.segment_rebuild) carries a lost knee with its shank, but it needs two
+markers on the shank: a tracking marker on its shaft and the ankle at its end, which the foot's markers
+put. In a high kick a studio loses the foot's markers as well (the Vicon free-form take loses heel and
+metatarsals for its last second), and the knee and ankle were then held, up to 0.77 and 1.3 m off.
+
+One marker on the shank is still enough for the whole leg but one angle. The leg is two rigid bodies:
+the thigh turns about the hip joint centre and carries the knee's epicondyles, and the shank turns about
+the axis between them and carries the malleoli and the marker. Their shape is taken from the last frame
+the knee's epicondyles and the marker were all seen (bone lengths are constant, issue 9). The marker's
+distance from the hip then fixes the knee's bend, and its direction all of the thigh's turn but the
+turn about the hip-marker line: that one is kept from the last frame, the thigh turned as little as
+puts the marker where it is (issue 9's "swivel angle carried in its parent's frame").
+
+The rebuild runs first: where it has its partners it does better (the malleoli from the foot's markers,
+the knee from the ankle and the shank marker). The tibial tuberosity is left to it.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from numba import njit
+
+from mocap_core.ik.kernels import axis_angle, mm, mv, rigid_fit_first, rotation_between, vfinite, vnorm
+from mocap_core.localization import hip_centres
+from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
+
+# The points of one leg's model, in this order: the hip centre, the knee's epicondyles (the bend's axis),
+# the malleoli, and the shank marker.
+HIP, FLE, FME, FAL, TAM, MARKER = range(6)
+KNEE_ANKLE = ("FLE", "FME", "FAL", "TAM")
+MAX_BEND_STEP = np.radians(30.0)  # the knee's bend searched this far either side of the last frame's
+SEARCH_STEP = np.radians(1.0)     # first in these steps, then in tenths of them about the best
+BEND_PRICE_M = 0.001              # per radian away from the last bend: settles near-ties between two bends
+
+
+class LegHinge:
+    """Fills lost knee and ankle landmarks frame by frame. Keep one per actor: it owns each leg's shape.
+    ``tracking_of``: the segment of each tracking marker passed to :meth:`fill` (LandmarkMap.tracking_of)."""
+
+    def __init__(self, tracking_of: Sequence[str] = ()):
+        self.n_tracking = len(tracking_of)
+        n_lm = len(LANDMARKS)
+        # per leg: its knee and ankle landmarks, and its shank's first tracking marker (-1: none), as a point
+        # after the landmarks
+        self.points = np.array([[LANDMARK_INDEX[f"{side}_{name}"] for name in KNEE_ANKLE]
+                                + [next((n_lm + j for j, seg in enumerate(tracking_of) if seg == f"{side}_shank"), -1)]
+                                for side in ("L", "R")], np.int64)
+        self.shape = np.full((2, 6, 3), np.nan)        # the model's points in the frame its shape was taken
+        self.turn = np.zeros((2, 3, 3))                # the thigh's turn since then, in the pelvis frame
+        self.bend = np.zeros(2)                        # and the knee's bend since then (radians)
+
+    @property
+    def active(self) -> bool:
+        """False when the profile has no shank marker: nothing to fill from."""
+        return bool((self.points[:, -1] >= 0).any())
+
+    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None) -> np.ndarray:
+        """One frame of landmarks (n_landmarks, 3), NaN = lost, and the tracking markers (n_tracking, 3).
+        Fills in place; returns the mask of the landmarks filled."""
+        out = np.zeros(len(landmarks), np.bool_)
+        if tracking is None or not self.active:
+            return out
+        if len(tracking) != self.n_tracking:  # (as the segment rebuild: a caller's mistake, not bad input)
+            raise ValueError(f"expected {self.n_tracking} tracking markers, got {len(tracking)}")
+        pelvis, left_hip, right_hip = hip_centres(landmarks)
+        points = np.concatenate([landmarks, tracking])
+        for leg, hip in enumerate((left_hip, right_hip)):
+            if self.points[leg, -1] >= 0 and vfinite(hip):
+                fill_leg(points, hip, pelvis, self.points[leg], self.shape[leg], self.turn[leg], self.bend[leg:leg + 1],
+                         out)
+        landmarks[:] = points[:len(landmarks)]
+        return out
+
+
+@njit(cache=True)
+def fill_leg(points, hip, pelvis, index, shape, turn, bend, out):
+    """One leg: take its shape where knee and marker are seen, else put what is lost by it."""
+    now = np.empty((6, 3))
+    now[HIP] = hip
+    for i in range(5):
+        now[1 + i] = points[index[i]]
+    if not vfinite(now[MARKER]):
+        return
+    if vfinite(now[FLE]) and vfinite(now[FME]):  # seen (or rebuilt): the shape from this frame
+        if vfinite(shape[HIP]):  # a lost malleolus keeps its place on the shank
+            for k in range(FAL, TAM + 1):
+                if not vfinite(now[k]) and vfinite(shape[k]):
+                    before, after = np.empty((3, 3)), np.empty((3, 3))
+                    for r, m in enumerate((FLE, FME, MARKER)):
+                        before[r], after[r] = shape[m], now[m]
+                    rot, t = rigid_fit_first(before, after, 3)
+                    now[k] = mv(rot, shape[k]) + t
+        shape[:] = now
+        turn[:] = pelvis.T  # (the thigh's turn in the pelvis frame: none in the world since this frame)
+        bend[0] = 0.0
+        return
+    if not vfinite(shape[HIP]):  # no shape yet
+        return
+    axis = shape[FME] - shape[FLE]
+    if vnorm(axis) < 1e-6:
+        return
+    axis /= vnorm(axis)
+    # the bend that puts the marker as far from the hip as it is
+    target = vnorm(now[MARKER] - hip)
+    best, best_cost = bend[0], np.inf
+    for step, half_width in ((SEARCH_STEP, MAX_BEND_STEP), (SEARCH_STEP / 10, SEARCH_STEP)):
+        centre = best
+        n = int(half_width / step)
+        for i in range(-n, n + 1):
+            phi = centre + i * step
+            m = _bent(shape, axis, phi, MARKER)
+            cost = abs(vnorm(m - shape[HIP]) - target) + BEND_PRICE_M * abs(phi - bend[0])
+            if cost < best_cost:
+                best, best_cost = phi, cost
+    bend[0] = best
+    # the thigh turned with the pelvis, then as little as puts the marker in its direction from the hip,
+    # then about the hip-marker line as keeps the knee's axis nearest its direction in the pelvis frame
+    world = mm(pelvis, turn)
+    reach = mv(world, _bent(shape, axis, best, MARKER) - shape[HIP])
+    was = mv(world, axis)
+    line = now[MARKER] - hip
+    world = mm(rotation_between(reach, line), world)
+    world = mm(_about_line(line, mv(world, axis), was), world)
+    turn[:] = mm(pelvis.T.copy(), world)
+    for k in range(FLE, TAM + 1):
+        if vfinite(now[k]) or not vfinite(shape[k]):
+            continue
+        p = _bent(shape, axis, best, k) if k >= FAL else shape[k]
+        points[index[k - 1]] = hip + mv(world, p - shape[HIP])
+        out[index[k - 1]] = True
+
+
+@njit(cache=True)
+def _bent(shape, axis, phi, k):
+    """Point ``k`` of the shank, in the shape's frame, with the knee bent by ``phi`` about its axis."""
+    return shape[FLE] + mv(axis_angle(axis, phi), shape[k] - shape[FLE])
+
+
+@njit(cache=True)
+def _about_line(line, direction, target):
+    """The turn about ``line`` that brings ``direction`` nearest ``target``."""
+    u = line / vnorm(line)
+    a, b = direction - (direction @ u) * u, target - (target @ u) * u
+    if vnorm(a) < 1e-9 or vnorm(b) < 1e-9:
+        return np.eye(3)
+    return axis_angle(u, np.arctan2(u @ np.cross(a, b), a @ b))
