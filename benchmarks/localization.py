@@ -13,6 +13,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mocap_core.hip_interpolation import HIP_INDEX, HipInterpolator  # noqa: E402
+from mocap_core.leg_hinge import LegHinge  # noqa: E402
 from mocap_core.localization import Localizer  # noqa: E402
 from mocap_core.pose_memory import CAPACITY, PoseMemory  # noqa: E402
 from mocap_core.profiles import LANDMARK_INDEX  # noqa: E402
@@ -53,6 +54,7 @@ def main():
         print(f"  localization, batch of {n}  {batch:7.1f}")
     pose_memory_cost()
     rebuild_cost()
+    leg_hinge_cost()
 
 
 def rebuild_cost():
@@ -68,6 +70,23 @@ def rebuild_cost():
     seen = per_call_us(lambda i: rebuilder.fill(lm[300 + i].copy(), tracking[300 + i]), 300)
     elbow = per_call_us(lambda i: rebuilder.fill(lost[300 + i].copy(), tracking[300 + i]), 300)
     print(f"segment rebuild (sprint), us per frame: nothing lost {seen:.1f}, one elbow rebuilt {elbow:.1f}")
+
+
+def leg_hinge_cost():
+    """The leg hinge on the Vicon take (53 markers): the legs seen (their shape taken), and one leg's knee
+    and ankle put from its shank marker."""
+    rec = read_recording(DATA / "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d")
+    lmap = load_profile("vicon53").resolve(rec.labels)
+    lm, tracking = lmap.apply(rec.positions[:600]).astype(np.float64), lmap.tracking(rec.positions[:600])
+    tracking = np.ascontiguousarray(tracking)  # (as a live frame's)
+    hinge = LegHinge(lmap.tracking_of)
+    for f in range(300):
+        hinge.fill(lm[f].copy(), tracking[f])
+    lost = lm.copy()
+    lost[:, [LANDMARK_INDEX[f"R_{name}"] for name in ("FLE", "FME", "FAL", "TAM")]] = np.nan
+    seen = per_call_us(lambda i: hinge.fill(lm[300 + i].copy(), tracking[300 + i]), 300)
+    filled = per_call_us(lambda i: hinge.fill(lost[300 + i].copy(), tracking[300 + i]), 300)
+    print(f"leg hinge (Vicon), us per frame: legs seen {seen:.1f}, one leg's knee and ankle put {filled:.1f}")
 
 
 def pose_memory_cost():

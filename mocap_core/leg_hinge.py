@@ -26,7 +26,7 @@ from numba import njit
 
 from mocap_core.ik.kernels import axis_angle, mm, mv, rigid_fit_first, rotation_between, vfinite, vnorm
 from mocap_core.localization import hip_centres
-from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
+from mocap_core.profiles import LANDMARK_INDEX
 
 # The points of one leg's model, in this order: the hip centre, the knee's epicondyles (the bend's axis),
 # the malleoli, and the shank marker.
@@ -43,20 +43,14 @@ class LegHinge:
 
     def __init__(self, tracking_of: Sequence[str] = ()):
         self.n_tracking = len(tracking_of)
-        n_lm = len(LANDMARKS)
-        # per leg: its knee and ankle landmarks, and its shank's first tracking marker (-1: none), as a point
-        # after the landmarks
-        self.points = np.array([[LANDMARK_INDEX[f"{side}_{name}"] for name in KNEE_ANKLE]
-                                + [next((n_lm + j for j, seg in enumerate(tracking_of) if seg == f"{side}_shank"), -1)]
-                                for side in ("L", "R")], np.int64)
+        # per leg: its knee and ankle landmarks, and its shank's first tracking marker (-1: none)
+        self.legs = np.array([[LANDMARK_INDEX[f"{side}_{name}"] for name in KNEE_ANKLE]
+                              + [next((j for j, seg in enumerate(tracking_of) if seg == f"{side}_shank"), -1)]
+                              for side in ("L", "R")], np.int64)
         self.shape = np.full((2, 6, 3), np.nan)        # the model's points in the frame its shape was taken
         self.turn = np.zeros((2, 3, 3))                # the thigh's turn since then, in the pelvis frame
         self.bend = np.zeros(2)                        # and the knee's bend since then (radians)
-
-    @property
-    def active(self) -> bool:
-        """False when the profile has no shank marker: nothing to fill from."""
-        return bool((self.points[:, -1] >= 0).any())
+        self.active = bool((self.legs[:, -1] >= 0).any())  # False: no shank marker, nothing to fill from
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3), NaN = lost, and the tracking markers (n_tracking, 3).
@@ -66,78 +60,87 @@ class LegHinge:
             return out
         if len(tracking) != self.n_tracking:  # (as the segment rebuild: a caller's mistake, not bad input)
             raise ValueError(f"expected {self.n_tracking} tracking markers, got {len(tracking)}")
-        pelvis, left_hip, right_hip = hip_centres(landmarks)
-        points = np.concatenate([landmarks, tracking])
-        for leg, hip in enumerate((left_hip, right_hip)):
-            if self.points[leg, -1] >= 0 and vfinite(hip):
-                fill_leg(points, hip, pelvis, self.points[leg], self.shape[leg], self.turn[leg], self.bend[leg:leg + 1],
-                         out)
-        landmarks[:] = points[:len(landmarks)]
+        fill_frame(landmarks, np.asarray(tracking, np.float64), self.legs, self.shape, self.turn, self.bend, out)
         return out
 
 
 @njit(cache=True)
-def fill_leg(points, hip, pelvis, index, shape, turn, bend, out):
-    """One leg: take its shape where knee and marker are seen, else put what is lost by it."""
+def fill_frame(lm, tracking, legs, shape, turn, bend, out):
+    pelvis, left_hip, right_hip = hip_centres(lm)
+    if not (vfinite(left_hip) and vfinite(right_hip)):
+        return
     now = np.empty((6, 3))
-    now[HIP] = hip
-    for i in range(5):
-        now[1 + i] = points[index[i]]
-    if not vfinite(now[MARKER]):
-        return
-    if vfinite(now[FLE]) and vfinite(now[FME]):  # seen (or rebuilt): the shape from this frame
-        if vfinite(shape[HIP]):  # a lost malleolus keeps its place on the shank
-            for k in range(FAL, TAM + 1):
-                if not vfinite(now[k]) and vfinite(shape[k]):
-                    before, after = np.empty((3, 3)), np.empty((3, 3))
-                    for r, m in enumerate((FLE, FME, MARKER)):
-                        before[r], after[r] = shape[m], now[m]
-                    rot, t = rigid_fit_first(before, after, 3)
-                    now[k] = mv(rot, shape[k]) + t
-        shape[:] = now
-        turn[:] = pelvis.T  # (the thigh's turn in the pelvis frame: none in the world since this frame)
-        bend[0] = 0.0
-        return
-    if not vfinite(shape[HIP]):  # no shape yet
-        return
+    for leg in range(2):
+        if legs[leg, 4] < 0 or not vfinite(tracking[legs[leg, 4]]):
+            continue
+        now[HIP] = left_hip if leg == 0 else right_hip
+        for i in range(4):
+            now[FLE + i] = lm[legs[leg, i]]
+        now[MARKER] = tracking[legs[leg, 4]]
+        if vfinite(now[FLE]) and vfinite(now[FME]):
+            take_shape(now, shape[leg], turn[leg], pelvis)
+            bend[leg] = 0.0
+        elif vfinite(shape[leg, HIP]):
+            bend[leg] = put_leg(now, shape[leg], turn[leg], bend[leg], pelvis)
+            for i in range(4):
+                if not vfinite(lm[legs[leg, i]]) and vfinite(now[FLE + i]):
+                    lm[legs[leg, i]] = now[FLE + i]
+                    out[legs[leg, i]] = True
+
+
+@njit(cache=True)
+def take_shape(now, shape, turn, pelvis):
+    """The leg seen (or rebuilt): its shape from this frame. A lost malleolus keeps its place on the shank
+    (the rigid motion of epicondyles and marker since the last shape)."""
+    if vfinite(shape[HIP]) and not (vfinite(now[FAL]) and vfinite(now[TAM])):
+        before, after = np.empty((3, 3)), np.empty((3, 3))
+        for r, m in enumerate((FLE, FME, MARKER)):
+            before[r], after[r] = shape[m], now[m]
+        rot, t = rigid_fit_first(before, after, 3)
+        for k in range(FAL, TAM + 1):
+            if not vfinite(now[k]) and vfinite(shape[k]):
+                now[k] = mv(rot, shape[k]) + t
+    shape[:] = now
+    turn[:] = pelvis.T  # (the thigh's turn in the pelvis frame: none in the world since this frame)
+
+
+@njit(cache=True)
+def put_leg(now, shape, turn, bend, pelvis):
+    """The lost points of ``now`` put by the hip and the marker; returns the knee's bend."""
     axis = shape[FME] - shape[FLE]
     if vnorm(axis) < 1e-6:
-        return
+        return bend
     axis /= vnorm(axis)
-    # the bend that puts the marker as far from the hip as it is
-    target = vnorm(now[MARKER] - hip)
-    best, best_cost = bend[0], np.inf
+    # the bend that puts the marker as far from the hip as it is (Rodrigues on the marker's offset)
+    v = shape[MARKER] - shape[FLE]
+    across, along = np.cross(axis, v), (axis @ v) * axis
+    to_hip = shape[FLE] - shape[HIP]
+    target = vnorm(now[MARKER] - now[HIP])
+    best, best_cost = bend, np.inf
     for step, half_width in ((SEARCH_STEP, MAX_BEND_STEP), (SEARCH_STEP / 10, SEARCH_STEP)):
         centre = best
         n = int(half_width / step)
         for i in range(-n, n + 1):
             phi = centre + i * step
-            m = _bent(shape, axis, phi, MARKER)
-            cost = abs(vnorm(m - shape[HIP]) - target) + BEND_PRICE_M * abs(phi - bend[0])
+            c, s = np.cos(phi), np.sin(phi)
+            cost = abs(vnorm(to_hip + c * v + s * across + (1 - c) * along) - target) + BEND_PRICE_M * abs(phi - bend)
             if cost < best_cost:
                 best, best_cost = phi, cost
-    bend[0] = best
+    bent = axis_angle(axis, best)
     # the thigh turned with the pelvis, then as little as puts the marker in its direction from the hip,
     # then about the hip-marker line as keeps the knee's axis nearest its direction in the pelvis frame
     world = mm(pelvis, turn)
-    reach = mv(world, _bent(shape, axis, best, MARKER) - shape[HIP])
     was = mv(world, axis)
-    line = now[MARKER] - hip
-    world = mm(rotation_between(reach, line), world)
+    line = now[MARKER] - now[HIP]
+    world = mm(rotation_between(mv(world, to_hip + mv(bent, v)), line), world)
     world = mm(_about_line(line, mv(world, axis), was), world)
     turn[:] = mm(pelvis.T.copy(), world)
     for k in range(FLE, TAM + 1):
         if vfinite(now[k]) or not vfinite(shape[k]):
             continue
-        p = _bent(shape, axis, best, k) if k >= FAL else shape[k]
-        points[index[k - 1]] = hip + mv(world, p - shape[HIP])
-        out[index[k - 1]] = True
-
-
-@njit(cache=True)
-def _bent(shape, axis, phi, k):
-    """Point ``k`` of the shank, in the shape's frame, with the knee bent by ``phi`` about its axis."""
-    return shape[FLE] + mv(axis_angle(axis, phi), shape[k] - shape[FLE])
+        p = shape[k] - shape[HIP] if k < FAL else to_hip + mv(bent, shape[k] - shape[FLE])
+        now[k] = now[HIP] + mv(world, p)
+    return best
 
 
 @njit(cache=True)

@@ -35,9 +35,9 @@ def warm_up(parts: tuple[str, ...] = PARTS) -> None:
 
 
 def _warm(part: str) -> None:
-    """Run one part's kernels once: localization, the segment rebuild, the pose memory, or one solve on a
-    chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic fills of
-    BEYOND_THESIS)."""
+    """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory,
+    or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic
+    fills of BEYOND_THESIS)."""
     from mocap_core.body_model import MIN_SAMPLES
     from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
@@ -54,6 +54,15 @@ def _warm(part: str) -> None:
         rebuilder.fill(lm.copy(), upper)
         lm[LANDMARK_INDEX["L_HLE"]] = np.nan  # rebuilt: Kabsch and the distances (LAPACK's first calls) run now
         rebuilder.fill(lm, upper)
+        from mocap_core.leg_hinge import LegHinge  # (the rebuild's second part)
+
+        hinge, lm = LegHinge(("L_shank",)), rng.normal(size=(len(LANDMARKS), 3))
+        hinge.fill(lm.copy(), upper)
+        lm[[LANDMARK_INDEX[f"L_{name}"] for name in ("FLE", "FME", "FAL")]] = np.nan  # put, one malleolus kept
+        hinge.fill(lm, upper)
+        lm = rng.normal(size=(len(LANDMARKS), 3))
+        lm[LANDMARK_INDEX["L_FAL"]] = np.nan
+        hinge.fill(lm, upper)
         return
     if part == "pose_memory":  # one call compiles the whole kernel, recall included
         from mocap_core.pose_memory import PoseMemory

@@ -39,7 +39,8 @@ def _kicking_leg(frames):
         knee = hip + 0.40 * thigh
         lm[f, LANDMARK_INDEX["R_FLE"]], lm[f, LANDMARK_INDEX["R_FME"]] = knee + 0.05 * lateral, knee - 0.05 * lateral
         ankle = knee + 0.42 * shank
-        lm[f, LANDMARK_INDEX["R_FAL"]], lm[f, LANDMARK_INDEX["R_TAM"]] = ankle + 0.035 * lateral, ankle - 0.035 * lateral
+        lm[f, LANDMARK_INDEX["R_FAL"]] = ankle + 0.035 * lateral
+        lm[f, LANDMARK_INDEX["R_TAM"]] = ankle - 0.035 * lateral
         marker[f, 0] = knee + 0.2 * shank + 0.04 * lateral + 0.03 * ahead
     return lm, marker
 
