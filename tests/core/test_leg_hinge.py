@@ -5,7 +5,7 @@ import pytest
 from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
-from mocap_core.leg_hinge import LegHinge
+from mocap_core.leg_hinge import COURSE_FRAMES, LegHinge
 
 from tests.conftest import data_file
 
@@ -78,12 +78,29 @@ def test_no_shank_marker_nothing_filled_and_a_wrong_count_is_an_error():
     assert not hinge.fill(lm[0].copy(), None).any()  # no tracking markers given: nothing to go on
     for f in range(100):
         hinge.fill(lm[f], marker[f])
-    gone = np.full((1, 3), np.nan)  # the shank marker lost too: nothing to put the leg by
-    assert not hinge.fill(lm[100], gone).any()
-    assert np.isnan(lm[100, LANDMARK_INDEX["R_FLE"]]).all()
-    assert hinge.fill(lm[101], marker[101]).sum() == 4
+    assert hinge.fill(lm[100], marker[100]).sum() == 4
     with pytest.raises(ValueError, match="expected 1 tracking markers"):
-        hinge.fill(lm[102], np.zeros((2, 3)))
+        hinge.fill(lm[101], np.zeros((2, 3)))
+
+
+def test_a_lost_shank_marker_goes_on_at_its_last_step_for_a_few_frames():
+    """Knee, ankle and the shank marker lost together: for COURSE_FRAMES frames the leg is put as by a
+    marker going on at its last step (the same points as a second hinge given that marker), then not."""
+    lm, marker = _kicking_leg(120)
+    for name in KNEE_ANKLE:
+        lm[100:, LANDMARK_INDEX[name]] = np.nan
+    hinge, told = LegHinge(["R_shank"]), LegHinge(["R_shank"])
+    for f in range(100):
+        hinge.fill(lm[f], marker[f])
+        told.fill(lm[f].copy(), marker[f])
+    step, gone = marker[99] - marker[98], np.full((1, 3), np.nan)
+    for k in range(1, COURSE_FRAMES + 1):
+        frame, expected = lm[99 + k].copy(), lm[99 + k].copy()
+        assert hinge.fill(frame, gone).sum() == 4
+        told.fill(expected, marker[99] + k * step)
+        assert np.allclose(frame, expected, equal_nan=True)
+    frame = lm[100 + COURSE_FRAMES].copy()
+    assert not hinge.fill(frame, gone).any() and np.isnan(frame[LANDMARK_INDEX["R_FLE"]]).all()
 
 
 def test_a_leg_never_seen_whole_is_not_filled():
