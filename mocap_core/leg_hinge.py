@@ -90,10 +90,11 @@ def fill_frame(lm, tracking, legs, shape, turn, bend, course, lost_frames, out):
         for i in range(4):
             now[FLE + i] = lm[legs[leg, i]]
         now[MARKER] = course[leg, 0]
-        if seen and vfinite(now[FLE]) and vfinite(now[FME]):
+        knee_seen = vfinite(now[FLE]) and vfinite(now[FME])
+        if seen and knee_seen:
             take_shape(now, shape[leg], turn[leg], pelvis)
             bend[leg] = 0.0
-        elif vfinite(shape[leg, HIP]):
+        elif not knee_seen and vfinite(shape[leg, HIP]):
             bend[leg] = put_leg(now, shape[leg], turn[leg], bend[leg], pelvis)
             for i in range(4):
                 if not vfinite(lm[legs[leg, i]]) and vfinite(now[FLE + i]):
