@@ -3,16 +3,16 @@ import numpy as np
 import pytest
 
 from mocap_core.landmark_fills import LandmarkFills
+from mocap_core.leg_hinge import COURSE_FRAMES, LegHinge
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
-from mocap_core.leg_hinge import COURSE_FRAMES, LegHinge
 
 from tests.conftest import data_file
 
 KNEE_ANKLE = ("R_FLE", "R_FME", "R_FAL", "R_TAM")
 
 
-def _rot_z_up(angle):
+def _turn_about_up(angle):
     """A turn about the vertical (y: the pelvis frame's up here)."""
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
@@ -26,7 +26,7 @@ def _kicking_leg(frames):
     marker = np.zeros((frames, 1, 3))
     for f in range(frames):
         t = f / 100
-        turn, origin = _rot_z_up(0.8 * np.sin(0.7 * t)), np.array([0.3 * t, 1.0, 0.1 * t])
+        turn, origin = _turn_about_up(0.8 * np.sin(0.7 * t)), np.array([0.3 * t, 1.0, 0.1 * t])
         hip_flexion, knee_flexion = np.radians(40 - 40 * np.cos(2.1 * t)), np.radians(45 - 45 * np.cos(3.3 * t))
         local = {"L_IAS": [0.12, 0, 0], "R_IAS": [-0.12, 0, 0], "SACR": [0, 0.0, -0.15]}
         for name, p in local.items():
