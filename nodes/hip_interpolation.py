@@ -4,8 +4,8 @@ Reads ``markers/raw`` (the recording's own labels) and publishes ``markers/fille
 landmark of the profile (the PAF names, mocap_core.profiles.LANDMARKS), so every later stage is
 independent of the marker set. Flags: measured, interpolated (the pelvis markers this node
 predicted, and with ``rebuild`` the forearm, foot and shank landmarks it rebuilt, with the help of
-the profile's tracking markers, and the knees and ankles the leg hinge put; with ``pose_memory`` the knee and ankle landmarks it recalled from
-the take's earlier poses) or missing.
+the profile's tracking markers, and the knees and ankles the leg hinge put; with ``pose_memory`` the
+knee and ankle landmarks it recalled from the take's earlier poses) or missing.
 """
 from __future__ import annotations
 
