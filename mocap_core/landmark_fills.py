@@ -32,7 +32,7 @@ class LandmarkFills:
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking)
         if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
-            filled |= self.leg_hinge.fill(landmarks, tracking)
+            filled |= self.leg_hinge.fill(landmarks, tracking, filled)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
             recalled = self.memory.fill(landmarks, filled, tracking)
             filled = recalled if filled is None else filled | recalled
@@ -48,7 +48,7 @@ class LandmarkFills:
             landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking)
         if self.leg_hinge is not None:
             for f in range(len(landmarks)):
-                filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f])
+                filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f], filled[f])
         if self.memory is not None:
             landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking)
             filled = recalled if filled is None else filled | recalled

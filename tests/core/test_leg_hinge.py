@@ -103,6 +103,53 @@ def test_a_lost_shank_marker_goes_on_at_its_last_step_for_a_few_frames():
     assert not hinge.fill(frame, gone).any() and np.isnan(frame[LANDMARK_INDEX["R_FLE"]]).all()
 
 
+def _turned_about(points, pivot, end, angle):
+    """``points`` turned by ``angle`` about the line from ``pivot`` to ``end``."""
+    u = (end - pivot) / np.linalg.norm(end - pivot)
+    k = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    turn = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    return pivot + (points - pivot) @ turn.T
+
+
+@pytest.mark.parametrize("wrong_deg", [-25, 12, 40])
+def test_a_knee_rebuilt_from_the_marker_and_the_ankle_alone_gets_its_roll_from_the_hip(wrong_deg):
+    """The rebuild's shaft pair (shank marker and lateral malleolus, the medial one lost) leaves the knee's
+    roll about their line as its reference had it. Given a roll off by ``wrong_deg``, the hinge turns the
+    epicondyles back to where their distances from the hip centre hold: exactly (0.5 mm) without the price
+    that holds the roll near the rebuild's, and nearer than given with it. A seen knee, or one the rebuild
+    had three partners for, is left as it is."""
+    lm, marker = _kicking_leg(300)
+    fle, fme, fal, tam = (LANDMARK_INDEX[n] for n in KNEE_ANKLE)
+    hinge, priced = LegHinge(["R_shank"], roll_price=0.0), LegHinge(["R_shank"])
+    for f in range(100):
+        assert not hinge.fill(lm[f].copy(), marker[f], np.zeros(len(LANDMARKS), bool)).any()
+        priced.fill(lm[f].copy(), marker[f], np.zeros(len(LANDMARKS), bool))
+    rebuilt = np.zeros(len(LANDMARKS), bool)
+    rebuilt[[fle, fme]] = True
+    error, given, error_priced = [], [], []
+    for f in range(100, 300):
+        frame = lm[f].copy()
+        frame[tam] = np.nan
+        frame[[fle, fme]] = _turned_about(lm[f, [fle, fme]], marker[f, 0], lm[f, fal], np.radians(wrong_deg))
+        before, settled = frame.copy(), frame.copy()
+        assert not hinge.fill(frame, marker[f], rebuilt).any()  # (rebuilt points are not counted again)
+        priced.fill(settled, marker[f], rebuilt)
+        error_priced.append(np.linalg.norm(settled[[fle, fme]] - lm[f, [fle, fme]], axis=1).max())
+        error.append(np.linalg.norm(frame[[fle, fme]] - lm[f, [fle, fme]], axis=1).max())
+        given.append(np.linalg.norm(before[[fle, fme]] - lm[f, [fle, fme]], axis=1).max())
+        assert np.array_equal(np.delete(frame, [fle, fme], axis=0), np.delete(before, [fle, fme], axis=0),
+                              equal_nan=True)
+    error, given, error_priced = np.array(error), np.array(given), np.array(error_priced)
+    assert error.max() < 0.0005 and (error_priced < given).all(), (error.max(), (error_priced / given).max())
+    # three partners (both malleoli and the marker) fix the roll themselves; a seen knee is measured
+    frame = lm[150].copy()
+    frame[[fle, fme]] += 0.03
+    for mask in (rebuilt, np.zeros(len(LANDMARKS), bool)):
+        moved = frame.copy()
+        hinge.fill(moved, marker[150], mask)
+        assert np.array_equal(moved[[fle, fme]], frame[[fle, fme]])
+
+
 def test_a_leg_never_seen_whole_is_not_filled():
     """No frame with the knee's epicondyles and the marker seen together: no shape to fill by."""
     lm, marker = _kicking_leg(50)
