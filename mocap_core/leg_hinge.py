@@ -51,13 +51,13 @@ BEND_PRICE_M = 0.001              # per radian away from the last bend: settles 
 # 311 / 296, 366 / 296, 549 / 296). (Frames, not seconds: 6 at that take's 120 Hz are 50 ms.)
 COURSE_FRAMES = 6
 # The knee's roll about the shank marker-ankle line is searched this far either side of the rebuild's, in
-# ROLL_STEP steps, then in tenths of them. ROLL_PRICE (square metres per square radian) holds it near the
-# rebuild's where the distances hardly fix it: their own noise is 6-14 mm. Vicon take, knee and ankle hidden
-# from 1 s, right / left knee and ankle: 59 / 38, 48 / 24 mm without the roll; priced at 0, 57 / 38, 38 / 21
-# (right knee max 369 against 296); at 0.0001, 55 / 41, 37 / 20; at 0.001, 53 / 40, 37 / 20; at 0.01,
-# 57 / 37, 38 / 21.
+# ROLL_STEP steps, then in tenths and hundredths of them (0.05 deg: 0.05 mm at the epicondyles). ROLL_PRICE
+# (square metres per square radian) holds it near the rebuild's where the distances hardly fix it: their own
+# noise is 6-14 mm. Vicon take, knee and ankle hidden from 1 s, right / left knee and ankle: 59 / 38, 48 / 24 mm
+# without the roll; priced at 0, 57 / 38, 38 / 21 (right knee max 369 against 296); at 0.0001, 55 / 41,
+# 37 / 20; at 0.001, 53 / 40, 36 / 20; at 0.01, 57 / 37, 38 / 21.
 MAX_ROLL = np.radians(60.0)
-ROLL_STEP = np.radians(1.0)
+ROLL_STEP = np.radians(5.0)
 ROLL_PRICE = 0.001
 DISTANCE_RATE = 1 / 100  # how fast the learned hip-epicondyle distances follow the frames that measure them
 
@@ -98,17 +98,16 @@ class LegHinge:
         if rebuilt is None:
             rebuilt = np.zeros(len(landmarks), np.bool_)
         tracking = np.asarray(tracking, np.float64)
-        settle_roll(landmarks, tracking, rebuilt, self.legs, self.shank_markers, self.hip_distance, self.roll_price)
-        fill_frame(landmarks, tracking, self.legs, self.shape, self.turn, self.bend, self.course,
-                   self.lost_frames, out)
+        fill_frame(landmarks, tracking, rebuilt, self.legs, self.shank_markers, self.shape, self.turn, self.bend,
+                   self.course, self.lost_frames, self.hip_distance, self.roll_price, out)
         return out
 
 
 @njit(cache=True)
-def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price):
+def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price, left_hip, right_hip):
     """Learn the epicondyles' distances from the hip centre where they are seen; where the rebuild put them
     from the shank marker and the ankle alone, turn them about that line to keep those distances."""
-    _, left_hip, right_hip = hip_centres(lm)
+    v, across, along = np.empty((2, 3)), np.empty((2, 3)), np.empty((2, 3))
     for leg in range(2):
         hip = left_hip if leg == 0 else right_hip
         fle, fme, fal, tam, marker = legs[leg]
@@ -131,26 +130,34 @@ def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price)
         if vnorm(line) < 1e-6:
             continue
         line /= vnorm(line)
+        for e, k in enumerate((fle, fme)):  # (Rodrigues: each epicondyle's offset from the pivot, split)
+            v[e] = lm[k] - pivot
+            along[e] = (line @ v[e]) * line
+            across[e] = np.cross(line, v[e])
         best, best_cost = 0.0, np.inf
-        for step, half_width in ((ROLL_STEP, MAX_ROLL), (ROLL_STEP / 10, ROLL_STEP)):
+        for step, half_width in ((ROLL_STEP, MAX_ROLL), (ROLL_STEP / 10, ROLL_STEP),
+                                 (ROLL_STEP / 100, ROLL_STEP / 10)):
             centre = best
-            n = int(half_width / step)
+            n = int(round(half_width / step))
             for i in range(-n, n + 1):
                 a = centre + i * step
-                turn = axis_angle(line, a)
+                c, sn = np.cos(a), np.sin(a)
                 cost = price * a * a
-                for e, k in enumerate((fle, fme)):
-                    cost += (vnorm(pivot + mv(turn, lm[k] - pivot) - hip) - hip_distance[leg, e]) ** 2
+                for e in range(2):
+                    turned = pivot + c * v[e] + sn * across[e] + (1 - c) * along[e]
+                    cost += (vnorm(turned - hip) - hip_distance[leg, e]) ** 2
                 if cost < best_cost:
                     best, best_cost = a, cost
-        turn = axis_angle(line, best)
-        for k in (fle, fme):
-            lm[k] = pivot + mv(turn, lm[k] - pivot)
+        c, sn = np.cos(best), np.sin(best)
+        for e, k in enumerate((fle, fme)):
+            lm[k] = pivot + c * v[e] + sn * across[e] + (1 - c) * along[e]
 
 
 @njit(cache=True)
-def fill_frame(lm, tracking, legs, shape, turn, bend, course, lost_frames, out):
+def fill_frame(lm, tracking, rebuilt, legs, shank_markers, shape, turn, bend, course, lost_frames, hip_distance,
+               roll_price, out):
     pelvis, left_hip, right_hip = hip_centres(lm)
+    settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, roll_price, left_hip, right_hip)
     now = np.empty((6, 3))
     for leg in range(2):
         if legs[leg, 4] < 0:
