@@ -15,7 +15,8 @@ turn about the hip-marker line. That one is carried in the pelvis frame (issue 9
 in its parent's frame"): the thigh turns with the pelvis, then as little as puts the marker where it is,
 then about the hip-marker line as keeps the knee's axis nearest its direction in the pelvis frame. (A
 leg that only bends, hip and knee, is then followed exactly, but near a straight knee: there the marker's
-distance from the hip hardly changes with the bend, which is then ambiguous.)
+distance from the hip hardly changes with the bend, which is then ambiguous.) The ankle is on the shank
+too: with the marker lost and the ankle seen (or rebuilt from the foot), it takes the marker's place.
 
 The rebuild runs first: where it has its partners it does better (the malleoli from the foot's markers,
 the knee from the ankle and the shank marker). The tibial tuberosity is left to it.
@@ -45,7 +46,9 @@ MAX_BEND_STEP = np.radians(30.0)  # the knee's bend searched this far either sid
 SEARCH_STEP = np.radians(1.0)     # first in these steps, then in tenths of them about the best
 BEND_PRICE_M = 0.001              # per radian away from the last bend: settles near-ties between two bends
 # A shank marker lost goes on at its last step for this many frames, and the leg with it (issue 9's "velocity
-# over short gaps"); after that the leg is left to the IK stage. In the Vicon take's kick the wand is lost for
+# over short gaps"); after that the ankle, where it is seen or rebuilt, takes its place (stop 27: Vicon take,
+# right knee / ankle hidden from 1 s, 53 / 40 -> 42 / 39 mm; the wand's real gaps last up to 25 frames), and
+# else the leg is left to the IK stage. In the Vicon take's kick the wand is lost for
 # a few frames at 8.40 s: right knee / ankle hidden from 1 s, 67 / 54 mm (max 465 / 656) with the leg held
 # there; 3 / 6 / 9 / 12 / 24 frames: 61 / 43, 59 / 38, 59 / 35, 63 / 37, 77 / 37 mm (max 363 / 440, 296 / 296,
 # 311 / 296, 366 / 296, 549 / 296). (Frames, not seconds: 6 at that take's 120 Hz are 50 ms.)
@@ -163,18 +166,23 @@ def fill_frame(lm, tracking, rebuilt, legs, shank_markers, shape, turn, bend, co
         if legs[leg, 4] < 0:
             continue
         seen = follow_marker(tracking[legs[leg, 4]], course[leg], lost_frames[leg:leg + 1])
-        if not (seen or lost_frames[leg] <= COURSE_FRAMES) or not (vfinite(left_hip) and vfinite(right_hip)):
+        if not (vfinite(left_hip) and vfinite(right_hip)):
             continue
         now[HIP] = left_hip if leg == 0 else right_hip
         for i in range(4):
             now[FLE + i] = lm[legs[leg, i]]
         now[MARKER] = course[leg, 0]
+        point = MARKER
+        if not (seen or lost_frames[leg] <= COURSE_FRAMES):
+            if not (vfinite(now[FAL]) and vfinite(shape[leg, FAL])):
+                continue
+            point = FAL
         knee_seen = vfinite(now[FLE]) and vfinite(now[FME])
         if seen and knee_seen:
             take_shape(now, shape[leg], turn[leg], pelvis)
             bend[leg] = 0.0
         elif not knee_seen and vfinite(shape[leg, HIP]):
-            bend[leg] = put_leg(now, shape[leg], turn[leg], bend[leg], pelvis)
+            bend[leg] = put_leg(now, shape[leg], turn[leg], bend[leg], pelvis, point)
             for i in range(4):
                 if not vfinite(lm[legs[leg, i]]) and vfinite(now[FLE + i]):
                     lm[legs[leg, i]] = now[FLE + i]
@@ -215,17 +223,17 @@ def take_shape(now, shape, turn, pelvis):
 
 
 @njit(cache=True)
-def put_leg(now, shape, turn, bend, pelvis):
+def put_leg(now, shape, turn, bend, pelvis, point):
     """The lost points of ``now`` put by the hip and the marker; returns the knee's bend."""
     axis = shape[FME] - shape[FLE]
     if vnorm(axis) < 1e-6:
         return bend
     axis /= vnorm(axis)
     # the bend that puts the marker as far from the hip as it is (Rodrigues on the marker's offset)
-    v = shape[MARKER] - shape[FLE]
+    v = shape[point] - shape[FLE]
     across, along = np.cross(axis, v), (axis @ v) * axis
     to_hip = shape[FLE] - shape[HIP]
-    target = vnorm(now[MARKER] - now[HIP])
+    target = vnorm(now[point] - now[HIP])
     best, best_cost = bend, np.inf
     for step, half_width in ((SEARCH_STEP, MAX_BEND_STEP), (SEARCH_STEP / 10, SEARCH_STEP)):
         centre = best
@@ -241,7 +249,7 @@ def put_leg(now, shape, turn, bend, pelvis):
     # then about the hip-marker line as keeps the knee's axis nearest its direction in the pelvis frame
     world = mm(pelvis, turn)
     was = mv(world, axis)
-    line = now[MARKER] - now[HIP]
+    line = now[point] - now[HIP]
     world = mm(rotation_between(mv(world, to_hip + mv(bent, v)), line), world)
     world = mm(_about_line(line, mv(world, axis), was), world)
     turn[:] = mm(pelvis.T.copy(), world)
