@@ -224,12 +224,13 @@ def take_shape(now, shape, turn, pelvis):
 
 @njit(cache=True)
 def put_leg(now, shape, turn, bend, pelvis, point):
-    """The lost points of ``now`` put by the hip and the marker; returns the knee's bend."""
+    """The lost points of ``now`` put by the hip and a point on the shank (``point``: the marker, or the
+    ankle while the marker is lost); returns the knee's bend."""
     axis = shape[FME] - shape[FLE]
     if vnorm(axis) < 1e-6:
         return bend
     axis /= vnorm(axis)
-    # the bend that puts the marker as far from the hip as it is (Rodrigues on the marker's offset)
+    # the bend that puts the point as far from the hip as it is (Rodrigues on the point's offset)
     v = shape[point] - shape[FLE]
     across, along = np.cross(axis, v), (axis @ v) * axis
     to_hip = shape[FLE] - shape[HIP]
