@@ -47,7 +47,8 @@ SEARCH_STEP = np.radians(1.0)     # first in these steps, then in tenths of them
 BEND_PRICE_M = 0.001              # per radian away from the last bend: settles near-ties between two bends
 # A shank marker lost goes on at its last step for this many frames, and the leg with it (issue 9's "velocity
 # over short gaps"); after that the ankle, where it is seen or rebuilt, takes its place (stop 27: Vicon take,
-# right knee / ankle hidden from 1 s, 53 / 40 -> 42 / 39 mm; the wand's real gaps last up to 25 frames), and
+# right knee / ankle hidden from 1 s, 53 / 40 -> 42 / 39 mm; the wand's real gaps last up to 25 frames; with it,
+# a course of 0 / 3 / 12 frames gave 49 / 39, 51 / 46, 50 / 37), and
 # else the leg is left to the IK stage. In the Vicon take's kick the wand is lost for
 # a few frames at 8.40 s: right knee / ankle hidden from 1 s, 67 / 54 mm (max 465 / 656) with the leg held
 # there; 3 / 6 / 9 / 12 / 24 frames: 61 / 43, 59 / 38, 59 / 35, 63 / 37, 77 / 37 mm (max 363 / 440, 296 / 296,
