@@ -73,14 +73,13 @@ class LegHinge:
     def __init__(self, tracking_of: Sequence[str] = (), roll_price: float = ROLL_PRICE):
         self.n_tracking = len(tracking_of)
         self.roll_price = roll_price
-        # per leg: its knee and ankle landmarks, and its shank's first tracking marker (-1: none)
-        self.legs = np.array([[LANDMARK_INDEX[f"{side}_{name}"] for name in KNEE_ANKLE]
-                              + [next((j for j, seg in enumerate(tracking_of) if seg == f"{side}_shank"), -1)]
-                              for side in ("L", "R")], np.int64)
         # per leg: all its shank's tracking markers (-1 padding): the rebuild's partners with the malleoli
         shanks = [[j for j, seg in enumerate(tracking_of) if seg == f"{side}_shank"] for side in ("L", "R")]
         width = max(1, *map(len, shanks))
         self.shank_markers = np.array([m + [-1] * (width - len(m)) for m in shanks], np.int64)
+        # per leg: its knee and ankle landmarks, and its shank's first tracking marker (-1: none)
+        self.legs = np.array([[LANDMARK_INDEX[f"{side}_{name}"] for name in KNEE_ANKLE] + [first]
+                              for side, first in zip(("L", "R"), self.shank_markers[:, 0])], np.int64)
         self.hip_distance = np.full((2, 2), np.nan)    # the epicondyles' learned distances from the hip centre
         self.shape = np.full((2, 6, 3), np.nan)        # the model's points in the frame its shape was taken
         self.turn = np.zeros((2, 3, 3))                # the thigh's turn since then, in the pelvis frame
