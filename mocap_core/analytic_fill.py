@@ -441,6 +441,8 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         since = seen_age[k, kind]  # frames since this kind of source was last seen
         if found_or_lost and since <= FLICKER_FRAMES:
             _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, SOURCE_JUMP_M_S * dt)
+        elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
+            raw_vel[k] = 0.0  # each taken into the offset (stop 28: the Vicon take's kicking knee, 0.46 m in 5 frames)
     else:
         if was != MISSING and not handed:  # (a hand-over's jump is not the source's step)
             _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)

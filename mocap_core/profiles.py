@@ -38,7 +38,7 @@ LANDMARKS: tuple[str, ...] = ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "S
     f"{side}_{name}" for name in _SIDED for side in SIDES)
 LANDMARK_INDEX = {name: i for i, name in enumerate(LANDMARKS)}
 # Bones whose extra markers a profile may list under ``tracking`` (mocap_core.segment_rebuild uses them).
-TRACKING_BONES = ("upper_arm", "forearm", "shank", "foot")
+TRACKING_BONES = ("upper_arm", "forearm", "thigh", "shank", "foot")
 TRACKING_SEGMENTS: tuple[str, ...] = tuple(f"{side}_{bone}" for bone in TRACKING_BONES for side in SIDES)
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 _MEAN = re.compile(r"^mean\((.*)\)$")

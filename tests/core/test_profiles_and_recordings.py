@@ -87,6 +87,6 @@ def test_tracking_markers_are_resolved_apart_from_the_landmarks(tmp_path):
     assert lmap.apply(frame).shape[1] == len(LANDMARKS)  # the landmarks are unchanged by them
     lmap = load_profile(p).resolve(["SACR", "FRM", "SHN1"])  # a lacking tracking marker only helps less
     assert lmap.tracking_of == ("L_forearm", "R_shank") and lmap.absent_tracking == ("SHN2",)
-    p.write_text("name: mine\nlandmarks:\n  SACR: SACR\ntracking:\n  L_thigh: [THI]\n")
-    with pytest.raises(ProfileError, match="unknown tracking segment 'L_thigh'.*L_forearm"):
+    p.write_text("name: mine\nlandmarks:\n  SACR: SACR\ntracking:\n  L_hip: [THI]\n")
+    with pytest.raises(ProfileError, match="unknown tracking segment 'L_hip'.*L_thigh"):
         load_profile(p)

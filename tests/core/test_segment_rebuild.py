@@ -183,6 +183,58 @@ def test_the_tracking_markers_distances_hold_when_the_styloids_slide():
     assert np.linalg.norm(lost[hle] - moved[hle]) < 0.008
 
 
+@pytest.mark.parametrize("lost_names, slid, tracking_of, held, free", [
+    # the malleoli: the foot flexes (heel and one metatarsal slide against the ankle); the shank's wand holds
+    (("L_FAL", "L_TAM"), ("L_FCC", "L_FM2"), ("L_foot", "L_foot", "L_shank"), (2,), (0, 1)),
+    # the knee's epicondyles: the malleoli's skin slides; the thigh's marker holds, the shank's own does not
+    (("L_FLE", "L_FME", "L_TTC"), ("L_FAL", "L_TAM"), ("L_shank", "L_shank", "L_thigh"), (2,), (0, 1)),
+])
+def test_the_bone_above_holds_a_joints_landmarks(lost_names, slid, tracking_of, held, free):
+    """The malleoli belong to the shank as well as the foot, the knee's epicondyles to the thigh as well as the
+    shank: their learned distances to the bone above's tracking marker are kept within 1.5 mm when the own
+    bone's partners slide by 10-12 mm, and the bone's own tracking markers do not hold them firmly (the
+    foot flexes: the Vicon take's malleolus keeps its distance to the metatarsals only within 10-13 mm SD)."""
+    rng = np.random.default_rng(11)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    tracks = rng.normal(scale=0.1, size=(len(tracking_of), 3))
+    lost_idx = [LANDMARK_INDEX[n] for n in lost_names]
+    rebuilder = SegmentRebuilder(tracking_of)
+    rebuilder.fill(first.copy(), tracks.copy())
+    rot, shift = rotation([0.3, 1, -0.2], 0.7), np.array([0.2, -0.1, 0.3])
+    moved, moved_tracks = first @ rot.T + shift, tracks @ rot.T + shift
+    lost = moved.copy()
+    lost[lost_idx] = np.nan
+    lost[LANDMARK_INDEX[slid[0]]] += [0.012, 0, 0]
+    lost[LANDMARK_INDEX[slid[1]]] += [0, -0.01, 0.005]
+    moved_tracks[free[0]] += [0, 0.03, 0.01]  # an own-bone tracking marker slides as well
+    assert rebuilder.fill(lost, moved_tracks.copy())[lost_idx[0]]
+    point = lost[lost_idx[0]]
+    for k in held:
+        learned = np.linalg.norm(first[lost_idx[0]] - tracks[k])
+        assert abs(np.linalg.norm(point - moved_tracks[k]) - learned) < 0.0015, k
+    assert np.linalg.norm(point - moved[lost_idx[0]]) < 0.012
+
+
+def test_a_rigid_leg_is_rebuilt_exactly_with_the_bones_above():
+    """A rigid motion of the whole leg (foot, shank and thigh markers all moved alike) is reproduced exactly
+    with the shank's and thigh's distances on."""
+    rng = np.random.default_rng(12)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    tracking_of = ("L_foot", "L_foot", "L_shank", "L_thigh")
+    tracks = rng.normal(scale=0.1, size=(len(tracking_of), 3))
+    rebuilder = SegmentRebuilder(tracking_of)
+    rebuilder.fill(first.copy(), tracks.copy())
+    rot, shift = rotation([1, -0.3, 0.6], 0.5), np.array([0.1, 0.4, -0.2])
+    moved, moved_tracks = first @ rot.T + shift, tracks @ rot.T + shift
+    names = ("L_FAL", "L_TAM", "L_FLE", "L_FME")
+    lost = moved.copy()
+    lost[[LANDMARK_INDEX[n] for n in names]] = np.nan
+    rebuilt = rebuilder.fill(lost, moved_tracks.copy())
+    for n in names:
+        assert rebuilt[LANDMARK_INDEX[n]], n
+        np.testing.assert_allclose(lost[LANDMARK_INDEX[n]], moved[LANDMARK_INDEX[n]], atol=1e-6)
+
+
 def test_partners_on_one_line_rebuild_nothing():
     """Heel and malleoli lost: the toe landmark is the midpoint of the two metatarsal tracking markers,
     so the three partners lie on one line and the foot's rotation about it is unknown."""
