@@ -34,7 +34,8 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import axis_angle, follow, mm, mv, rigid_fit_first, rotation_between, vfinite, vnorm
+from mocap_core.ik.kernels import (axis_angle, best_roll, follow, mm, mv, rigid_fit_first, rotation_between,
+                                   vfinite, vnorm)
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX
 
@@ -110,7 +111,7 @@ class LegHinge:
 def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price, left_hip, right_hip):
     """Learn the epicondyles' distances from the hip centre where they are seen; where the rebuild put them
     from the shank marker and the ankle alone, turn them about that line to keep those distances."""
-    v, across, along = np.empty((2, 3)), np.empty((2, 3)), np.empty((2, 3))
+    points, hip_only = np.empty((2, 3)), np.empty((1, 3))
     for leg in range(2):
         hip = left_hip if leg == 0 else right_hip
         fle, fme, fal, tam, marker = legs[leg]
@@ -133,27 +134,13 @@ def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price,
         if vnorm(line) < 1e-6:
             continue
         line /= vnorm(line)
-        for e, k in enumerate((fle, fme)):  # (Rodrigues: each epicondyle's offset from the pivot, split)
-            v[e] = lm[k] - pivot
-            along[e] = (line @ v[e]) * line
-            across[e] = np.cross(line, v[e])
-        best, best_cost = 0.0, np.inf
-        for step, half_width in ((ROLL_STEP, MAX_ROLL), (ROLL_STEP / 10, ROLL_STEP),
-                                 (ROLL_STEP / 100, ROLL_STEP / 10)):
-            centre = best
-            n = int(round(half_width / step))
-            for i in range(-n, n + 1):
-                a = centre + i * step
-                c, sn = np.cos(a), np.sin(a)
-                cost = price * a * a
-                for e in range(2):
-                    turned = pivot + c * v[e] + sn * across[e] + (1 - c) * along[e]
-                    cost += (vnorm(turned - hip) - hip_distance[leg, e]) ** 2
-                if cost < best_cost:
-                    best, best_cost = a, cost
-        c, sn = np.cos(best), np.sin(best)
         for e, k in enumerate((fle, fme)):
-            lm[k] = pivot + c * v[e] + sn * across[e] + (1 - c) * along[e]
+            points[e] = lm[k]
+        hip_only[0] = hip
+        turn = axis_angle(line, best_roll(pivot, line, points, hip_only, hip_distance[leg].reshape(2, 1), price,
+                                          MAX_ROLL, ROLL_STEP))
+        for k in (fle, fme):
+            lm[k] = pivot + mv(turn, lm[k] - pivot)
 
 
 @njit(cache=True)

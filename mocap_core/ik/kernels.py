@@ -140,6 +140,36 @@ def rotation_between(a, b):
 
 
 @njit(cache=True)
+def best_roll(pivot, line, points, targets, distances, price, max_roll, step):
+    """The turn about the line through ``pivot`` along the unit ``line`` that keeps ``points`` (n, 3) nearest
+    their ``distances`` (n, m; NaN: unknown) from ``targets`` (m, 3; NaN: not seen), plus ``price`` per squared
+    radian: searched within ``max_roll`` either side of none, in ``step``s, then in tenths and hundredths of
+    them about the best. Returns the angle (Rodrigues: each point's offset from the pivot, split once)."""
+    n = points.shape[0]
+    v, across, along = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    for e in range(n):
+        v[e] = points[e] - pivot
+        along[e] = (line @ v[e]) * line
+        across[e] = np.cross(line, v[e])
+    best, best_cost = 0.0, np.inf
+    for fine, half_width in ((step, max_roll), (step / 10, step), (step / 100, step / 10)):
+        centre = best
+        k = int(round(half_width / fine))
+        for i in range(-k, k + 1):
+            a = centre + i * fine
+            c, s = math.cos(a), math.sin(a)
+            cost = price * a * a
+            for e in range(n):
+                turned = pivot + c * v[e] + s * across[e] + (1 - c) * along[e]
+                for m in range(targets.shape[0]):
+                    if not np.isnan(distances[e, m]) and vfinite(targets[m]):
+                        cost += (vnorm(turned - targets[m]) - distances[e, m]) ** 2
+            if cost < best_cost:
+                best, best_cost = a, cost
+    return best
+
+
+@njit(cache=True)
 def rigid_fit_first(before, after, n):
     """(R, t) with R before[i] + t ~ after[i] for the first n rows, least squares (Kabsch; the kernel
     twin of geometry.rigid_fit, unweighted)."""
