@@ -75,9 +75,9 @@ SEGMENTS = (
 # above, and whether the bone's own tracking markers hold their distances firmly too (second pass, below).
 # The malleoli keep theirs to the shank's markers, not to the foot's: on the Vicon take the lateral one
 # keeps its distance from the shank's wand within 2 mm SD, from the metatarsals only within 10-13 mm SD
-# (ranges of 40-60 mm) as the foot flexes. The knee's epicondyles keep theirs to a thigh marker (the Vicon set's LHIP / RHIP, 3-7 mm
-# SD), not to the shank's wand. Stop 28, Vicon take, knee and ankle hidden from 1 s (joints, studio
-# options, with the blend's fix): left 36 / 20 -> 22 / 15 mm, right 42 / 39 -> 35 / 31; with the own
+# (ranges of 40-60 mm) as the foot flexes. The knee's epicondyles keep theirs to a thigh marker (the Vicon
+# set's LHIP / RHIP, 3-7 mm SD), not to the shank's wand. Stop 28, Vicon take, knee and ankle hidden from
+# 1 s (joints, studio options, with the blend's fix): left 36 / 20 -> 22 / 15 mm, right 42 / 39 -> 34 / 31; with the own
 # markers held as well, right 41 / 33 (landmarks); the forearm's own markers held too are better for the
 # elbow (Vicon left max 264 mm, 355 without them).
 ALSO_ON = {"forearm": (("HLE", "HME"), "upper_arm", True),
@@ -116,8 +116,8 @@ def segment_table(tracking_of: Sequence[str] = ()
     """Point indices per segment (segments x width; the rebuilt members first, then the partners and the
     bone's tracking markers, then the points used for distances only; -1 padding), and per segment how
     many are rebuilt, how many move rigidly with it, how many of the first are refined by distances, and
-    from which point on the tracking markers hold those distances firmly (0: the bone's own too). Points are the landmarks, then the tracking markers (``tracking_of``: the segment of each, e.g.
-    "L_forearm")."""
+    from which point on the tracking markers hold those distances firmly (0: the bone's own too). Points
+    are the landmarks, then the tracking markers (``tracking_of``: the segment of each, e.g. "L_forearm")."""
     def tracks(name):
         return [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == name]
 
@@ -219,31 +219,21 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                     n += 1
                     if seg[m] >= N_LANDMARKS:
                         shaft += 1
+            rolled, i, j = False, 0, 1  # (rolled: carried by partners i and j's line, then about it by the bone above)
             if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
                 rot, t = rigid_fit_first(before, after, n)
             elif n == MIN_SHAFT_PARTNERS and shaft == 1:
-                rot = rotation_between(before[1] - before[0], after[1] - after[0])
-                t = 0.5 * (after[0] + after[1]) - mv(rot, 0.5 * (before[0] + before[1]))
+                rot, t = _line_carry(before[0], before[1], after[0], after[1])
             elif n >= 2 and k < refined_count[s] and _above_seen(seg, rigid, width, seen, distance[s, k]):
                 i, j = _farthest(before, n)
-                rot = rotation_between(before[j] - before[i], after[j] - after[i])
-                t = 0.5 * (after[i] + after[j]) - mv(rot, 0.5 * (before[i] + before[j]))
-                line = (after[j] - after[i]) / max(vnorm(after[j] - after[i]), 1e-9)
-                point[0] = mv(rot, reference[s, k, k]) + t
-                for m in range(rigid, width):
-                    above[m - rigid] = np.nan
-                    if seen[m]:
-                        above[m - rigid] = lm[seg[m]]
-                turn = axis_angle(line, best_roll(after[i], line, point, above[:width - rigid],
-                                                  distance[s, k, rigid:width].reshape(1, width - rigid), ROLL_PRICE,
-                                                  MAX_ROLL, ROLL_STEP))
-                lm[seg[k]] = after[i] + mv(turn, point[0] - after[i])
-                rebuilt[seg[k]] = True
-                continue
+                rot, t = _line_carry(before[i], before[j], after[i], after[j])
+                rolled = True
             else:
                 continue
             p = mv(rot, reference[s, k, k]) + t
-            if k < refined_count[s]:
+            if rolled:
+                p = _roll_by_above(p, after[i], after[j], lm, seg, rigid, width, seen, distance[s, k], point, above)
+            elif k < refined_count[s]:
                 p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, -1)
                 p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR, held_from[s])
             lm[seg[k]] = p
@@ -251,7 +241,30 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
 
 
 @njit(cache=True)
+def _line_carry(before0, before1, after0, after1):
+    """The least rotation that turns the line between two points, and the shift that then puts their midpoint."""
+    rot = rotation_between(before1 - before0, after1 - after0)
+    return rot, 0.5 * (after0 + after1) - mv(rot, 0.5 * (before0 + before1))
+
+
+@njit(cache=True)
+def _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance, point, above):
+    """``p`` turned about the line from ``pivot`` toward ``toward`` to keep its learned distances to the bone
+    above's seen tracking markers best (``point`` and ``above``: work arrays)."""
+    line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
+    point[0] = p
+    for m in range(rigid, width):
+        above[m - rigid] = np.nan
+        if seen[m]:
+            above[m - rigid] = lm[seg[m]]
+    angle = best_roll(pivot, line, point, above[:width - rigid], distance[rigid:width].reshape(1, width - rigid),
+                      ROLL_PRICE, MAX_ROLL, ROLL_STEP)
+    return pivot + mv(axis_angle(line, angle), p - pivot)
+
+
+@njit(cache=True)
 def _above_seen(seg, rigid, width, seen, distance):
+    """Whether a tracking marker of the bone above is seen, with a learned distance to the member."""
     for m in range(rigid, width):
         if seen[m] and not np.isnan(distance[m]):
             return True
@@ -260,6 +273,7 @@ def _above_seen(seg, rigid, width, seen, distance):
 
 @njit(cache=True)
 def _farthest(points, n):
+    """The two of the first n points farthest apart (the steadiest line through them)."""
     best, bi, bj = -1.0, 0, 1
     for i in range(n):
         for j in range(i + 1, n):
