@@ -224,7 +224,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                 rot, t = rigid_fit_first(before, after, n)
             elif n == MIN_SHAFT_PARTNERS and shaft == 1:
                 rot, t = _line_carry(before[0], before[1], after[0], after[1])
-            elif n >= 2 and k < refined_count[s] and _above_seen(seg, rigid, width, seen, distance[s, k]):
+            elif n >= 2 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k]):
                 i, j = _farthest(before, n)
                 rot, t = _line_carry(before[i], before[j], after[i], after[j])
                 rolled = True
@@ -263,8 +263,9 @@ def _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance, poin
 
 
 @njit(cache=True)
-def _above_seen(seg, rigid, width, seen, distance):
-    """Whether a tracking marker of the bone above is seen, with a learned distance to the member."""
+def _above_seen(rigid, width, seen, distance):
+    """Whether a tracking marker of the bone above (a distance-only point) is seen, with a learned distance to
+    the member."""
     for m in range(rigid, width):
         if seen[m] and not np.isnan(distance[m]):
             return True
@@ -323,10 +324,7 @@ def _keep_distances(p, lm, seg, rigid, width, seen, distance, prior, held_from):
     """Gauss-Newton: the point nearest the estimate ``p`` (weight ``prior``) that keeps its learned
     distances to the seen points (``held_from`` >= 0: to the tracking markers from that point on);
     unchanged unless a distance-only point is seen."""
-    usable = False
-    for m in range(rigid, width):
-        usable = usable or (seen[m] and not np.isnan(distance[m]))
-    if not usable:
+    if not _above_seen(rigid, width, seen, distance):
         return p
     q = p.copy()
     for _ in range(10):
