@@ -410,13 +410,19 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     kind = 0 if s == LOCATED else 1
     raw = p.copy()
     heading = last_raw[k] + raw_vel[k]  # where the source was heading
-    markers_step = raw_vel[k].copy()  # (the markers' last step, at a loss)
+    markers_step = raw_vel[k].copy()  # (the markers' last step, at a loss; the estimate's, given up)
     lost = s != LOCATED and was == LOCATED
+    # an estimate given up for a hold, which knows nothing of where the joint went, is met like a loss: the
+    # output goes on along the estimate's course (stop 29: the Vicon take's kicking right knee, its shank's wand
+    # lost too, was 215 mm off after four held frames, then eased back from 260 mm); a course running goes on
+    gave_up = s == HELD and was == ESTIMATED and since_loss[k] == math.inf
     found_or_lost = (s == LOCATED) != (was == LOCATED)
     jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
     # handed from one fill to another (estimated, held) without such a jump: the new fill's jump is taken into
-    # the offset too, but a course weight after a loss goes on (the Vicon take's right wrist, handed from held
-    # to estimated at frame 979, moved 73 mm in that frame, 2.11x its normal step; 0.31x with it)
+    # the offset too (the Vicon take's right wrist, handed from held to estimated at frame 979, moved 73 mm in
+    # that frame, 2.11x its normal step; 0.31x with it). A course goes on through a hold; an estimate back
+    # from one ends it, and the output goes on from itself at its own step into the estimate, as into
+    # returning markers (the Vicon take's left elbow stayed on a stale course for 0.3 s: 107 -> 106 mm)
     handed = s != LOCATED and was != LOCATED and was != MISSING and s != was and not jumped
     spring_moved = 0.0
     trust[k, LOCATED_RUN] = trust[k, LOCATED_RUN] + 1 if s == LOCATED else 0
@@ -427,10 +433,11 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         miss = vnorm(raw - (heading + offset[k]))
         trust[k, MISS_SQ] += miss * miss
         trust[k, MISS_N] += 1
-    if handed:
+    back = handed and was == HELD and since_loss[k] < math.inf  # an estimate back from a hold, on a course
+    if handed and not back:
         offset[k] -= raw - heading
         offset_vel[k] = 0.0
-    if was != MISSING and (found_or_lost or jumped):
+    if was != MISSING and (found_or_lost or jumped or back):
         if since_loss[k] < math.inf:
             # the output left the spring's course for the markers': go on from it, at its own last step (the
             # fill's can be a recall's jitter: on dance1's knee 31 mm a frame where the leg moved 10)
@@ -458,7 +465,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     seen_raw[k, kind] = raw
     seen_age[k, kind] = 0
     p += offset[k]
-    if lost and course_on and trust[k, ACC_N] > 0:
+    if (lost or gave_up) and course_on and trust[k, ACC_N] > 0:
         course[k], course_step[k], since_loss[k], eased[k] = p, markers_step, 0.0, 0.0
     elif since_loss[k] < math.inf:
         since_loss[k] += dt
@@ -517,8 +524,9 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     stop 23). Markers that come back while the output is still leaving that course are met from the
     output as it went (its own last step), not as the fill went. An estimate that leaves its course faster
     than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way;
-    one handed between fills (estimated, held) without such a jump has its jump taken into the offset, and
-    a course weight goes on through it (since stop 25; until then it was not met). A flickering marker swings the
+    one handed between fills (estimated, held) without such a jump has its jump taken into the offset (since
+    stop 25; until then it was not met). An estimate given up for a hold starts a course as a loss does, and
+    one back from a hold ends a course as returning markers do (stop 29). A flickering marker swings the
     offset back and forth by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
