@@ -11,7 +11,8 @@ from typing import get_args
 from tqdm import tqdm
 
 from mocap_cli.measure import LAYOUTS
-from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, gap_run, gap_windows, localize_take, real_gap_moves,
+from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, blend_lag, gap_run, gap_windows, localize_take,
+                                    real_gap_moves,
                                     transition_moves, worst_case_timing)
 from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
 from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
@@ -261,12 +262,14 @@ def run_real_gaps(args) -> int:
                 "studio options without the blend": (True, BEYOND_THESIS | {"blend_half_life_s": 0.0}),
                 "studio options": (True, BEYOND_THESIS)}
     warm_up()
-    results = {}
+    results, solved = {}, {}
     for name, (beyond, options) in tqdm(variants.items(), desc="solving", unit="variant"):
         pipe = SkeletonPipeline(profile, rec.labels, beyond=beyond, rate_hz=rec.rate_hz, fill_options=options)
         chunks = list(pipe.run(rec.positions))
         status = np.concatenate([c.status for c in chunks])
-        results[name] = real_gap_moves(np.concatenate([c.positions for c in chunks]), status)
+        solved[name] = (np.concatenate([c.positions for c in chunks]), status)
+        results[name] = real_gap_moves(solved[name][0], status)
+    lag = blend_lag(*solved["studio options"], *solved["studio options without the blend"])
     missing = float(np.mean(~np.isfinite(rec.positions).all(axis=2)))
     filled = float(np.mean(np.isin(status, (Status.ESTIMATED, Status.HELD))))
     md = [f"{rec.source.split('/')[-1]} ({rec.n_frames} frames at {rec.rate_hz:g} Hz, {missing:.1%} of its markers "
@@ -287,12 +290,16 @@ def run_real_gaps(args) -> int:
 
     for name, r in results.items():
         row = r.row()
-        rows.append({"fill": name, **row})
+        lagged = {"located_over_50mm": lag.over_50mm, "located_over_100mm": lag.over_100mm,
+                  "located_off_max_m": lag.largest_m} if name == "studio options" else {}
+        rows.append({"fill": name, **row, **{k: lagged.get(k, "") for k in
+                                              ("located_over_50mm", "located_over_100mm", "located_off_max_m")}})
         worst = ", ".join(f"{joint} {frame}: {x:.1f}x" for x, joint, frame in r.worst[:3])
         md.append(f"| {name} | {row['changes']} | {row['changes_over_1_5']} | {ratio(row['changes_max'])} | "
                   f"{row['paced_over_1_5']} | {ratio(row['paced_max'])} | "
                   f"{row['filled_moves']} | {row['filled_over_1_5']} | {row['filled_over_3']} | "
                   f"{ratio(row['filled_max'])} | {worst} |")
+    md += ["", lag.sentence()]
     if not any(len(r.filled) for r in results.values()):
         md += ["", "No joint was filled in any frame: the take has no gaps to measure (mocap eval gaps hides some)."]
         log.warning("%s: no joint was filled in any frame, nothing to measure; mocap eval gaps makes gaps to fill",

@@ -66,6 +66,12 @@ DEFAULT_FRAME_S = 0.01
 COURSE_K = 3.0
 ACCEL_FLOOR = 1.0       # m/s^2
 FILL_SD_PRIOR = 0.01    # metres
+# reacquire_step_m caps how far the blend moves the output off its source in a frame; a source moving faster
+# may be left or met at a quarter of its own step. A kicking foot lost at 10 mm a frame, its fill running on at
+# 60, fell 0.75 m behind at the 10 mm cap, and then took 0.65 s to meet its markers (stop 29: the Vicon take's
+# right foot at frame 534). A half: the Vicon take's moves of filled joints over 1.5x their normal went 24 ->
+# 101 and dance1's ankle came back at 1.56x its normal step on short gaps; a quarter: 68, and 1.47x as before.
+PACE_SHARE = 0.25
 EASED = 0.999           # the weight at which the fill is taken whole
 # BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
 # where the markers came back and how many; frames located in a row.
@@ -425,6 +431,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     # returning markers (the Vicon take's left elbow stayed on a stale course for 0.3 s: 107 -> 106 mm)
     handed = s != LOCATED and was != LOCATED and was != MISSING and s != was and not jumped
     spring_moved = 0.0
+    limit = step  # how far the blend may move the output off its source this frame
     trust[k, LOCATED_RUN] = trust[k, LOCATED_RUN] + 1 if s == LOCATED else 0
     if trust[k, LOCATED_RUN] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two markers' steps
         trust[k, ACC_SUM] += vnorm(raw - heading) / (dt * dt)  # |acceleration|
@@ -453,14 +460,15 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     else:
         if was != MISSING and not handed:  # (a hand-over's jump is not the source's step)
             _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)
+        limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
         before = offset[k].copy()
         spring = offset_vel[k] + omega * before
         offset[k] = decay * (before + spring * dt)
         offset_vel[k] = decay * (offset_vel[k] - spring * omega * dt)
         moved = vnorm(offset[k] - before)
-        if step > 0 and moved > step:
-            offset[k] = before + (offset[k] - before) * (step / moved)
-        spring_moved = min(moved, step)
+        if step > 0 and moved > limit:
+            offset[k] = before + (offset[k] - before) * (limit / moved)
+        spring_moved = min(moved, limit)
     last_raw[k] = raw
     seen_raw[k, kind] = raw
     seen_age[k, kind] = 0
@@ -473,8 +481,8 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         w = course_weight(since_loss[k], trust[k])
         w = 1.0 if w >= EASED else w
         apart = vnorm(p - course[k])
-        if step > 0 and (w - eased[k]) * apart > step - spring_moved:  # reacquire_step_m caps the two together
-            w = eased[k] + max(step - spring_moved, 0.0) / apart
+        if step > 0 and (w - eased[k]) * apart > limit - spring_moved:  # one cap on the two together
+            w = eased[k] + max(limit - spring_moved, 0.0) / apart
         eased[k] = min(w, 1.0)
         p[:] = course[k] + eased[k] * (p - course[k])
         if eased[k] == 1.0:

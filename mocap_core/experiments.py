@@ -246,6 +246,36 @@ class RealGapMoves:
                 "filled_max": float(self.filled.max()) if len(self.filled) else float("nan")}
 
 
+@dataclass
+class BlendLag:
+    """How far a blend keeps the output off markers that are seen: in the frames where a joint is located in
+    both solves, the blended output against the same solve without the blend (the markers' joint there).
+    What is left of an offset where markers come back, eased out at the blend's pace."""
+    located: int                 # joint-frames located in both
+    over_50mm: int
+    over_100mm: int
+    largest_m: float
+    worst: tuple[str, int]       # (joint, frame) of the largest
+
+    def sentence(self) -> str:
+        return (f"With the blend, the output is off its seen markers by over 50 mm in {self.over_50mm} of "
+                f"{self.located} located joint-frames (over 100 mm in {self.over_100mm}), at most "
+                f"{self.largest_m * 1000:.0f} mm ({self.worst[0]} at frame {self.worst[1]}): what is left of an "
+                "offset where markers came back, eased out at the blend's pace.")
+
+
+def blend_lag(blended: np.ndarray, blended_status: np.ndarray, plain: np.ndarray,
+              plain_status: np.ndarray) -> BlendLag:
+    """``blended`` / ``plain``: (F, joints, 3) positions of one take solved with and without the blend, and
+    their (F, joints) status."""
+    both = (blended_status == Status.LOCATED) & (plain_status == Status.LOCATED)
+    off = np.where(both, np.linalg.norm(blended - plain, axis=-1), 0.0)
+    off = np.nan_to_num(off)
+    f, j = np.unravel_index(int(np.argmax(off)), off.shape)
+    return BlendLag(int(both.sum()), int((off > 0.05).sum()), int((off > 0.1).sum()), float(off[f, j]),
+                    (JOINTS[j], int(f)))
+
+
 PACE_WINDOW = 10  # frames either side of a change of status searched for the joint's own pace
 
 

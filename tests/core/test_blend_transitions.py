@@ -97,13 +97,21 @@ def test_returning_markers_are_met_without_a_step_known_answer():
     assert np.linalg.norm(out[-1] - truth[-1]) < 1e-4  # (after 8 half-lives)
 
 
-def test_a_step_caps_how_fast_the_offset_closes():
+@pytest.mark.parametrize("speed", [0.5, 3.0])  # m/s: 5 and 30 mm a frame at 100 Hz
+def test_a_step_caps_how_fast_the_offset_closes_or_half_the_joints_own_step(speed):
+    """reacquire_step_m caps the blend's own move a frame; a joint moving faster than twice that may be met or
+    left at half its own step (PACE_SHARE), so a fast one does not fall behind its fill (stop 29)."""
     rate_hz, step = 100.0, 0.002
-    out, truth = run(rate_hz, range(10, 10_000), step=step)
+    velocity = np.array([speed, 0.0, 0.0])
+    bias = lambda f: np.array([0.0, 0.3, 0.0])  # noqa: E731  (far enough for the cap to bind)
+    out, truth = run(rate_hz, range(10, 10_000), step=step, velocity=velocity, bias=bias, frames=200)
     extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
-    assert extra.max() <= step + 1e-12
-    spring, _ = run(rate_hz, range(10, 10_000))
-    assert np.abs(spring - truth).max() > 0.01  # (the uncapped spring moves faster than the cap)
+    cap = max(step, af.PACE_SHARE * speed / rate_hz)
+    assert extra.max() <= cap + 1e-12
+    assert extra.max() > 0.99 * cap  # (the cap binds)
+    spring, _ = run(rate_hz, range(10, 10_000), velocity=velocity, bias=bias, frames=200)
+    uncapped = np.linalg.norm(np.diff(spring, axis=0) - np.diff(truth, axis=0), axis=1)
+    assert uncapped.max() > 1.5 * cap  # (the spring alone moves faster than the cap)
 
 
 def test_an_estimate_that_jumps_to_another_source_mid_gap_is_met_smoothly_known_answer():
