@@ -12,8 +12,7 @@ from tqdm import tqdm
 
 from mocap_cli.measure import LAYOUTS
 from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, blend_lag, gap_run, gap_windows, localize_take,
-                                    real_gap_moves,
-                                    transition_moves, worst_case_timing)
+                                    real_gap_moves, transition_moves, worst_case_timing)
 from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
 from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams

@@ -66,11 +66,12 @@ DEFAULT_FRAME_S = 0.01
 COURSE_K = 3.0
 ACCEL_FLOOR = 1.0       # m/s^2
 FILL_SD_PRIOR = 0.01    # metres
-# reacquire_step_m caps how far the blend moves the output off its source in a frame; a source moving faster
-# may be left or met at a quarter of its own step. A kicking foot lost at 10 mm a frame, its fill running on at
-# 60, fell 0.75 m behind at the 10 mm cap, and then took 0.65 s to meet its markers (stop 29: the Vicon take's
-# right foot at frame 534). A half: the Vicon take's moves of filled joints over 1.5x their normal went 24 ->
-# 101 and dance1's ankle came back at 1.56x its normal step on short gaps; a quarter: 68, and 1.47x as before.
+# reacquire_step_m caps how far the blend moves the output off its source in a frame; a source moving over
+# four times that may be left or met at a quarter of its own step. A kicking foot lost at 10 mm a frame, its
+# fill running on at 60, fell 0.75 m behind at the 10 mm cap, and then took 0.65 s to meet its markers (stop
+# 29: the Vicon take's right foot at frame 534). A half: the Vicon take's moves of filled joints over 1.5x
+# their normal went 24 -> 101 and dance1's ankle came back at 1.56x its normal step on short gaps; a
+# quarter: 68, and 1.47x as before.
 PACE_SHARE = 0.25
 EASED = 0.999           # the weight at which the fill is taken whole
 # BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
@@ -520,22 +521,22 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
     had it and close the gap by at most ``step`` metres a frame (a rate-limited decaying offset).
-    With ``omega`` > 0 (blend_half_life_s): the output is the source (markers, or a fill's estimate) plus
-    an offset. Where the markers are lost or come back, the offset takes in the jump: the new source
-    less where the old one was heading (its last position plus its own last step), so the output goes on
-    as it went. The offset then dies out as a critically damped spring (Holden's, exact for any ``dt``),
-    by at most ``step`` a frame when that is set. At loss the offset is the truth the estimate has not
-    got: over a short gap it keeps the joint near its markers' last course. After a loss the output also
-    stays on that course (the markers' last step, on and on), leaving it for the fill as course_weight
-    says, which learns from the joint how fast its markers turn and how far its fill missed them where
-    they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
-    stop 23). Markers that come back while the output is still leaving that course are met from the
-    output as it went (its own last step), not as the fill went. An estimate that leaves its course faster
-    than SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way;
-    one handed between fills (estimated, held) without such a jump has its jump taken into the offset (since
-    stop 25; until then it was not met). An estimate given up for a hold starts a course as a loss does, and
-    one back from a hold ends a course as returning markers do (stop 29). A flickering marker swings the
-    offset back and forth by the two sources' difference: nothing builds up.
+    With ``omega`` > 0 (blend_half_life_s): the output is the source (markers, or a fill's estimate) plus an
+    offset. Where the markers are lost or come back, the offset takes in the jump: the new source less where the
+    old one was heading (its last position plus its own last step), so the output goes on as it went. The offset
+    then dies out as a critically damped spring (Holden's, exact for any ``dt``), by at most ``step`` a frame
+    when that is set (or PACE_SHARE of the source's own step, if more). At loss the offset is the truth the
+    estimate has not got: over a short gap it keeps the joint near its markers' last course. After a loss the
+    output also stays on that course (the markers' last step, on and on), leaving it for the fill as
+    course_weight says, which learns from the joint how fast its markers turn and how far its fill missed them
+    where they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
+    stop 23). Markers that come back while the output is still leaving that course are met from the output as it
+    went (its own last step), not as the fill went. An estimate that leaves its course faster than
+    SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way; one handed
+    between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
+    then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
+    hold ends a course as returning markers do (stop 29). A flickering marker swings the offset back and forth
+    by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
