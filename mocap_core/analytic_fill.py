@@ -369,6 +369,8 @@ class BlendState:
     since_loss: np.ndarray    # (n,) seconds since the markers were lost (inf: no loss being eased)
     eased: np.ndarray         # (n,) and how far it has gone from that course towards the fill (0-1)
     trust: np.ndarray         # (n, 5) what course_weight learns from (columns ACC_SUM ... LOCATED_RUN)
+    prev_raw: np.ndarray      # (n, 3) the source's position a frame before last_raw
+    prev_vel: np.ndarray      # (n, 3) and its step then
     step: float = 0.0
     omega: float = 0.0
     course_on: bool = True    # blend_course: after a loss, leave the markers' course as course_weight says
@@ -380,7 +382,7 @@ class BlendState:
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
-                   np.zeros((n, 5)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
+                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
     @property
     def on(self) -> bool:
@@ -398,7 +400,7 @@ class BlendState:
         blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
                           self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
                           self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
-                          self.frame_s, self.course_on)
+                          self.frame_s, self.course_on, self.prev_raw, self.prev_vel)
 
 
 @njit(cache=True)
@@ -411,12 +413,14 @@ def _take_step(velocity, step, limit):
 
 @njit(cache=True)
 def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
-                  course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on):
+                  course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on, prev_raw, prev_vel):
     """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
     a loss, eased from the markers' course into that (see blend_transitions)."""
     kind = 0 if s == LOCATED else 1
     raw = p.copy()
     heading = last_raw[k] + raw_vel[k]  # where the source was heading
+    old_raw = last_raw[k].copy()
+    old_vel = raw_vel[k].copy()
     markers_step = raw_vel[k].copy()  # (the markers' last step, at a loss; the estimate's, given up)
     lost = s != LOCATED and was == LOCATED
     # an estimate given up for a hold, which knows nothing of where the joint went, is met like a loss: the
@@ -425,6 +429,12 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     gave_up = s == HELD and was == ESTIMATED and since_loss[k] == math.inf
     found_or_lost = (s == LOCATED) != (was == LOCATED)
     jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
+    # a fill that stepped out for one frame, under the jump's threshold, and is back where it was heading
+    # before that: not a jump, and the output goes on at the step it had before the spike (stop 29: the Vicon
+    # take's left elbow stepped 82 mm out at frame 172 and back; met as a jump, the output went on at the
+    # spike's step, 150 mm off for 25 frames)
+    spike = jumped and s == was and vnorm(raw - (prev_raw[k] + 2.0 * prev_vel[k])) <= SOURCE_JUMP_M_S * dt
+    jumped = jumped and not spike
     # handed from one fill to another (estimated, held) without such a jump: the new fill's jump is taken into
     # the offset too (the Vicon take's right wrist, handed from held to estimated at frame 979, moved 73 mm in
     # that frame, 2.11x its normal step; 0.31x with it). A course goes on through a hold; an estimate back
@@ -442,6 +452,11 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         trust[k, MISS_SQ] += miss * miss
         trust[k, MISS_N] += 1
     back = handed and was == HELD and since_loss[k] < math.inf  # an estimate back from a hold, on a course
+    if spike:  # (ending a course, as a jump does)
+        offset[k] = last_out[k] + prev_vel[k] - raw
+        offset_vel[k] = 0.0
+        since_loss[k] = math.inf
+        raw_vel[k] = (raw - prev_raw[k]) * 0.5
     if handed and not back:
         offset[k] -= raw - heading
         offset_vel[k] = 0.0
@@ -459,7 +474,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
             raw_vel[k] = 0.0  # each taken into the offset (stop 28: the Vicon take's kicking knee, 0.46 m in 5 frames)
     else:
-        if was != MISSING and not handed:  # (a hand-over's jump is not the source's step)
+        if was != MISSING and not handed and not spike:  # (a hand-over's jump is not the source's step)
             _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)
         limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
         before = offset[k].copy()
@@ -471,6 +486,8 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             offset[k] = before + (offset[k] - before) * (limit / moved)
         spring_moved = min(moved, limit)
     last_raw[k] = raw
+    prev_raw[k] = old_raw
+    prev_vel[k] = old_vel
     seen_raw[k, kind] = raw
     seen_age[k, kind] = 0
     p += offset[k]
@@ -516,7 +533,7 @@ def _linear_return(p, s, was, last, offset, step):
 @njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
                       has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
-                      course_on=True):
+                      course_on, prev_raw, prev_vel):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -556,7 +573,8 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
         elif omega > 0:
             was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
             _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
-                          offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on)
+                          offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on,
+                          prev_raw, prev_vel)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):

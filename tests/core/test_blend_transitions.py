@@ -207,27 +207,45 @@ def test_an_estimate_back_from_a_hold_ends_the_course_known_answer():
     assert np.linalg.norm(out[-1] - truth[-1] - BIAS) < 1e-3              # the estimate (0.2 mm off after 0.45 s)
 
 
-def test_a_jump_leaves_no_stale_step_behind_known_answer():
-    """An estimate steps 80 mm in a frame (under SOURCE_JUMP_M_S at 120 Hz, so taken as its motion), then
-    turns back at 40 mm a frame (a hand-over between two fills of the Vicon take's kicking knee). Where that
-    old step led is 120 mm away: a jump, met like one, once. The jumped source's step is not known, so it
-    is not carried on: the next frame is not another jump (the old step kept made one every frame, each
-    taken into the offset: here 9.5 m off by the end, the Vicon take's knee 0.46 m in 5 frames)."""
-    rate_hz, turn = 120.0, 40
+def _step_out(rate_hz: float, turn: int, aside=np.zeros(3)):
+    """An estimate steps 80 mm in a frame at ``turn`` (under SOURCE_JUMP_M_S at 120 Hz, so taken as its motion),
+    then turns back at 40 mm a frame, ``aside`` from its line after that (a hand-over between two fills of the
+    Vicon take's kicking knee). Returns the output and the source."""
     def bias(f):
         if f < turn:
             return BIAS
         if f == turn:
             return BIAS + np.array([0.08, 0.0, 0.0]) - VELOCITY / rate_hz
-        return BIAS + np.array([0.08, 0.0, 0.0]) - (0.04 * rate_hz + VELOCITY[0]) * np.array([1.0, 0, 0]) * (
+        return BIAS + aside + np.array([0.08, 0.0, 0.0]) - (0.04 * rate_hz + VELOCITY[0]) * np.array([1.0, 0, 0]) * (
             (f - turn) / rate_hz)
     out, truth = run(rate_hz, range(10, 10_000), bias=bias, frames=120)
-    source = truth + np.array([bias(f) for f in range(120)])
+    return out, truth + np.array([bias(f) for f in range(120)])
+
+
+def test_a_jump_leaves_no_stale_step_behind_known_answer():
+    """After the 80 mm step the source turns back 80 mm aside of its line: where that old step led is 144 mm
+    away, and where it was heading before it 89 mm: a jump, met like one, once. The jumped source's step is
+    not known, so it is not carried on: the next frame is not another jump (the old step kept made one every
+    frame, each taken into the offset: 9.5 m off by the end, the Vicon take's knee 0.46 m in 5 frames)."""
+    rate_hz, turn = 120.0, 40
+    out, source = _step_out(rate_hz, turn, aside=np.array([0.0, 0.08, 0.0]))
     gap = np.linalg.norm(out - source, axis=1)
-    jump = 0.12
-    assert gap[turn + 1] == pytest.approx(jump, abs=0.01)  # met like a jump: the output went on as it went
-    assert gap[turn + 1:].max() <= gap[turn + 1] + 1e-9     # and never drifts further off the source
-    assert gap[-1] < 0.01                                    # the offset dies out
+    assert gap[turn + 1] == pytest.approx(np.hypot(0.12, 0.08), abs=0.01)  # met like a jump: went on as it went
+    assert gap[turn + 1:].max() <= gap[turn + 1] + 1e-9                     # and never drifts further off
+    assert gap[-1] < 0.01                                                    # the offset dies out
+
+
+def test_a_one_frame_spike_of_a_fill_is_not_carried_on_known_answer():
+    """After the 80 mm step the source is back within the jump's threshold of where it was heading before
+    it (40 mm): the step was a spike. The output goes on at its step from before the spike, not at the
+    spike's (which left the Vicon take's left elbow 150 mm off for 25 frames, stop 29), then eases in."""
+    rate_hz, turn = 120.0, 40
+    out, source = _step_out(rate_hz, turn)
+    np.testing.assert_allclose(out[turn + 1] - out[turn], VELOCITY / rate_hz, atol=5e-4)
+    gap = np.linalg.norm(out - source, axis=1)
+    assert gap[turn + 1] == pytest.approx(0.04, abs=0.005)
+    assert gap[turn + 1:].max() <= gap[turn + 1] + 1e-9
+    assert gap[-1] < 0.01
 
 
 def test_a_fast_estimate_is_followed_not_taken_for_a_jump():
