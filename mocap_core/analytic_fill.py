@@ -382,7 +382,8 @@ class BlendState:
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
-                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), step, BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
+                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), step,
+                   BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
     @property
     def on(self) -> bool:
@@ -419,9 +420,8 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     kind = 0 if s == LOCATED else 1
     raw = p.copy()
     heading = last_raw[k] + raw_vel[k]  # where the source was heading
-    old_raw = last_raw[k].copy()
-    old_vel = raw_vel[k].copy()
-    markers_step = raw_vel[k].copy()  # (the markers' last step, at a loss; the estimate's, given up)
+    before_raw = last_raw[k].copy()  # (the next frame's prev_raw / prev_vel, for its spike test)
+    before_step = raw_vel[k].copy()  # (also the markers' last step, at a loss; the estimate's, given up)
     lost = s != LOCATED and was == LOCATED
     # an estimate given up for a hold, which knows nothing of where the joint went, is met like a loss: the
     # output goes on along the estimate's course (stop 29: the Vicon take's kicking right knee, its shank's wand
@@ -486,13 +486,13 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             offset[k] = before + (offset[k] - before) * (limit / moved)
         spring_moved = min(moved, limit)
     last_raw[k] = raw
-    prev_raw[k] = old_raw
-    prev_vel[k] = old_vel
+    prev_raw[k] = before_raw
+    prev_vel[k] = before_step
     seen_raw[k, kind] = raw
     seen_age[k, kind] = 0
     p += offset[k]
     if (lost or gave_up) and course_on and trust[k, ACC_N] > 0:
-        course[k], course_step[k], since_loss[k], eased[k] = p, markers_step, 0.0, 0.0
+        course[k], course_step[k], since_loss[k], eased[k] = p, before_step, 0.0, 0.0
     elif since_loss[k] < math.inf:
         since_loss[k] += dt
         course[k] += course_step[k]
