@@ -289,10 +289,8 @@ def run_real_gaps(args) -> int:
 
     for name, r in results.items():
         row = r.row()
-        lagged = {"located_over_50mm": lag.over_50mm, "located_over_100mm": lag.over_100mm,
-                  "located_off_max_m": lag.largest_m} if name == "studio options" else {}
-        rows.append({"fill": name, **row, **{k: lagged.get(k, "") for k in
-                                              ("located_over_50mm", "located_over_100mm", "located_off_max_m")}})
+        lagged = lag.row() if name == "studio options" else dict.fromkeys(lag.row(), "")
+        rows.append({"fill": name, **row, **lagged})
         worst = ", ".join(f"{joint} {frame}: {x:.1f}x" for x, joint, frame in r.worst[:3])
         md.append(f"| {name} | {row['changes']} | {row['changes_over_1_5']} | {ratio(row['changes_max'])} | "
                   f"{row['paced_over_1_5']} | {ratio(row['paced_max'])} | "

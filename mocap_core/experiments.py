@@ -257,6 +257,10 @@ class BlendLag:
     largest_m: float
     worst: tuple[str, int]       # (joint, frame) of the largest
 
+    def row(self) -> dict:
+        return {"located_over_50mm": self.over_50mm, "located_over_100mm": self.over_100mm,
+                "located_off_max_m": self.largest_m}
+
     def sentence(self) -> str:
         return (f"With the blend, the output is off its seen markers by over 50 mm in {self.over_50mm} of "
                 f"{self.located} located joint-frames (over 100 mm in {self.over_100mm}), at most "
@@ -269,8 +273,7 @@ def blend_lag(blended: np.ndarray, blended_status: np.ndarray, plain: np.ndarray
     """``blended`` / ``plain``: (F, joints, 3) positions of one take solved with and without the blend, and
     their (F, joints) status."""
     both = (blended_status == Status.LOCATED) & (plain_status == Status.LOCATED)
-    off = np.where(both, np.linalg.norm(blended - plain, axis=-1), 0.0)
-    off = np.nan_to_num(off)
+    off = np.nan_to_num(np.where(both, np.linalg.norm(blended - plain, axis=-1), 0.0))
     f, j = np.unravel_index(int(np.argmax(off)), off.shape)
     return BlendLag(int(both.sum()), int((off > 0.05).sum()), int((off > 0.1).sum()), float(off[f, j]),
                     (JOINTS[j], int(f)))
