@@ -124,6 +124,31 @@ def _length(lengths, k, last):
 
 
 @njit(cache=True)
+def swivel_circle(root, target, upper, lower):
+    """The circle of the points ``upper`` from ``root`` and ``lower`` from ``target`` (apart): its centre, axis
+    (from root to target) and radius (0 out of reach: the point of the line nearest both)."""
+    dist = vnorm(target - root)
+    axis = (target - root) / dist
+    along = min(upper, max(-upper, (upper * upper - lower * lower + dist * dist) / (2 * dist)))
+    return root + along * axis, axis, math.sqrt(max(upper * upper - along * along, 0.0))
+
+
+@njit(cache=True)
+def nearest_on_circle(point, root, target, upper, lower):
+    """The point of swivel_circle(root, target, upper, lower) nearest ``point`` (``point`` itself where that is
+    not defined: ends together, or the point on the axis)."""
+    if not vnorm(target - root) > 1e-9:
+        return point
+    centre, axis, radius = swivel_circle(root, target, upper, lower)
+    v = point - centre
+    v = v - vdot(v, axis) * axis
+    size = vnorm(v)
+    if not size > 1e-9:
+        return point
+    return centre + v * (radius / size)
+
+
+@njit(cache=True)
 def _frame_along(y, like):
     """A bone frame whose y runs along ``y``, turned from ``like`` by the shortest arc."""
     return mm(rotation_between(like[:, 1].copy(), y), like)
@@ -205,13 +230,9 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
     # last knee-toe distance left it out of reach on dance1, the plane of hip, knee and toe undefined,
     # and the ankle 240 mm off where the last frame's lengths give 77.)
     root, target = positions[idx[a]].copy(), positions[idx[b]].copy()
-    d = target - root
-    dist = vnorm(d)
-    if not (dist > 1e-9 and upper > 0 and lower > 0):
+    if not (vnorm(target - root) > 1e-9 and upper > 0 and lower > 0):
         return 0
-    axis = d / dist
-    along = min(upper, max(-upper, (upper * upper - lower * lower + dist * dist) / (2 * dist)))
-    radius = math.sqrt(max(upper * upper - along * along, 0.0))
+    centre, axis, radius = swivel_circle(root, target, upper, lower)
     d_prev = pb - pa
     u_prev = (pk - pa) - (vdot(pk - pa, d_prev) / vdot(d_prev, d_prev)) * d_prev
     ref_now, ref_prev, kind = frames[idx[b]].copy(), prev_frames[b].copy(), 0
@@ -235,7 +256,6 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
     if not nu > 1e-9:
         return 0
     u = u / nu
-    centre = root + along * axis
     mean, weight = np.zeros(3), np.zeros(3)
     fit = False
     if b == k + 1 and kind == 0 and status[idx[b]] == LOCATED and dir_n[k] >= MIN_SAMPLES:
@@ -371,6 +391,7 @@ class BlendState:
     trust: np.ndarray         # (n, 5) what course_weight learns from (columns ACC_SUM ... LOCATED_RUN)
     prev_raw: np.ndarray      # (n, 3) the source's position a frame before last_raw
     prev_vel: np.ndarray      # (n, 3) and its step then
+    course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
     step: float = 0.0
     omega: float = 0.0
     course_on: bool = True    # blend_course: after a loss, leave the markers' course as course_weight says
@@ -382,7 +403,7 @@ class BlendState:
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
-                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), step,
+                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan), step,
                    BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
     @property
@@ -401,7 +422,7 @@ class BlendState:
         blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
                           self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
                           self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
-                          self.frame_s, self.course_on, self.prev_raw, self.prev_vel)
+                          self.frame_s, self.course_on, self.prev_raw, self.prev_vel, self.course_len)
 
 
 @njit(cache=True)
@@ -414,9 +435,11 @@ def _take_step(velocity, step, limit):
 
 @njit(cache=True)
 def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
-                  course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on, prev_raw, prev_vel):
+                  course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on, prev_raw, prev_vel,
+                  course_len, neighbours):
     """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
-    a loss, eased from the markers' course into that (see blend_transitions)."""
+    a loss, eased from the markers' course into that (see blend_transitions). ``neighbours``: the joints
+    before and after it in the chain, where both are located (else NaN)."""
     kind = 0 if s == LOCATED else 1
     raw = p.copy()
     heading = last_raw[k] + raw_vel[k]  # where the source was heading
@@ -493,9 +516,18 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     p += offset[k]
     if (lost or gave_up) and course_on and trust[k, ACC_N] > 0:
         course[k], course_step[k], since_loss[k], eased[k] = p, before_step, 0.0, 0.0
+        course_len[k, 0] = vnorm(p - neighbours[0])  # (NaN unless both are located)
+        course_len[k, 1] = vnorm(neighbours[1] - p)
     elif since_loss[k] < math.inf:
         since_loss[k] += dt
         course[k] += course_step[k]
+        # a lone joint's course keeps its distances to its located neighbours, turning with them (an elbow swings
+        # about the shoulder; its markers' straight course flies off the arm). Once one is lost it goes on
+        # straight from where it is. Stop 30, short gaps: dance2's elbows 9.5 / 9.6 -> 7.3 / 7.1 mm
+        if all_finite(course_len[k]) and all_finite(neighbours):
+            course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0], course_len[k, 1])
+        else:
+            course_len[k] = np.nan
         w = course_weight(since_loss[k], trust[k])
         w = 1.0 if w >= EASED else w
         apart = vnorm(p - course[k])
@@ -533,7 +565,7 @@ def _linear_return(p, s, was, last, offset, step):
 @njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
                       has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
-                      course_on, prev_raw, prev_vel):
+                      course_on, prev_raw, prev_vel, course_len):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -552,14 +584,17 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way; one handed
     between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
     then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
-    hold ends a course as returning markers do (stop 29). A flickering marker swings the offset back and forth
+    hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones
+    keeps its distances to them, on their circle (stop 30). A flickering marker swings the offset back and forth
     by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
-    markers' course after a loss and how far the output has left it."""
+    markers' course after a loss and how far the output has left it; ``course_len``, a lone joint's distances to
+    its neighbours where the course began."""
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
+    neighbours = np.empty((2, 3))
     for k in range(n):
         j = idx[k]
         s = status[j]
@@ -572,9 +607,13 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
             since_loss[k] = math.inf
         elif omega > 0:
             was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
+            neighbours[:] = np.nan
+            if 0 < k < n - 1 and status[idx[k - 1]] == LOCATED and status[idx[k + 1]] == LOCATED:
+                neighbours[0] = positions[idx[k - 1]]
+                neighbours[1] = positions[idx[k + 1]]
             _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
                           offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on,
-                          prev_raw, prev_vel)
+                          prev_raw, prev_vel, course_len, neighbours)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):

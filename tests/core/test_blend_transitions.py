@@ -382,3 +382,80 @@ def test_short_gaps_on_another_dancers_knee_and_ankle_come_back_without_a_twitch
     assert (np.nanmean(run_.error_m, axis=0) < 0.013).all(), np.nanmean(run_.error_m, axis=0)
     for move in transition_moves(run_, reference):
         assert move["loss_added_ratio"] < 1.5 and move["return_added_ratio"] < 1.5, move
+
+
+def test_nearest_on_circle_known_answer():
+    """The point of the circle of points 0.3 m from both ends of a 0.5 m line nearest a point off it: from the
+    circle's centre, halfway, the point's direction across the line, at the circle's radius."""
+    root, target = np.array([1.0, 2.0, 0.5]), np.array([1.5, 2.0, 0.5])
+    point = np.array([1.2, 2.3, 0.6])
+    got = af.nearest_on_circle(point, root, target, 0.3, 0.3)
+    radius = math.sqrt(0.3 ** 2 - 0.25 ** 2)
+    across = np.array([0.0, 0.3, 0.1]) / math.hypot(0.3, 0.1)
+    np.testing.assert_allclose(got, np.array([1.25, 2.0, 0.5]) + radius * across, atol=1e-12)
+    assert np.linalg.norm(got - root) == pytest.approx(0.3) and np.linalg.norm(got - target) == pytest.approx(0.3)
+    # out of reach (the line longer than both bones): the point of the line nearest both
+    np.testing.assert_allclose(af.nearest_on_circle(point, root, target + [0.5, 0, 0], 0.3, 0.3),
+                               [1.3, 2.0, 0.5], atol=1e-12)
+
+
+SWING_HZ = 1.0  # turns a second
+
+
+def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: int = 80):
+    """A shoulder, elbow and wrist (a bent arm: bones 0.3 and 0.25 m, 0.6 rad apart) swinging rigidly about the
+    shoulder at a turn a second; the elbow's markers lost from ``lost_at``, its estimate BIAS off; the
+    wrist's from ``wrist_lost_at``, its estimate where it is. Returns per frame the blend's course for the
+    elbow, whether one runs, and the truth (frames x 3 joints x 3)."""
+    blend = af.BlendState.empty(3, 0.01, HALF_LIFE, True)
+    courses, running, truths = [], [], []
+    for f in range(frames):
+        blend.advance_clock(f / rate_hz)
+        angle = 2 * math.pi * SWING_HZ * f / rate_hz
+        elbow = START + 0.3 * np.array([math.cos(angle), math.sin(angle), 0.0])
+        wrist = elbow + 0.25 * np.array([math.cos(angle + 0.6), math.sin(angle + 0.6), 0.0])
+        truth = np.array([START, elbow, wrist])
+        positions = truth.copy()
+        status = np.full(3, LOCATED, np.int64)
+        if f >= lost_at:
+            positions[1] += BIAS
+            status[1] = ESTIMATED
+        if f >= wrist_lost_at:
+            status[2] = ESTIMATED
+        blend.blend(positions, status, np.arange(3))
+        courses.append(blend.course[1].copy())
+        running.append(blend.since_loss[1] < math.inf)
+        truths.append(truth)
+    return np.array(courses), np.array(running), np.array(truths)
+
+
+def test_a_lone_joints_course_keeps_its_distances_to_its_located_neighbours_known_answer():
+    """An elbow lost while the arm swings about the shoulder: its markers' straight course flies off the arm;
+    held to its distances from the located shoulder and wrist (as where the course began), it turns with them.
+    Stop 30: dance2's elbows on short gaps 9.5 / 9.6 -> 7.3 / 7.1 mm."""
+    rate_hz, lost_at = 120.0, 20
+    course, running, truth = _swing(rate_hz, lost_at)
+    after = np.flatnonzero(running)
+    assert after[0] == lost_at and len(after) >= 8  # (the course runs while the fill is eased in)
+    first = course[lost_at]  # where the output was heading (the markers' last position and step)
+    upper, lower = np.linalg.norm(first - truth[lost_at, 0]), np.linalg.norm(truth[lost_at, 2] - first)
+    for f in after:
+        assert np.linalg.norm(course[f] - truth[f, 0]) == pytest.approx(upper, abs=1e-12)
+        assert np.linalg.norm(truth[f, 2] - course[f]) == pytest.approx(lower, abs=1e-12)
+    # nearer the truth than the straight course (the markers' last step, on and on)
+    straight = first + np.outer(after - lost_at, truth[lost_at - 1, 1] - truth[lost_at - 2, 1])
+    on_circle = np.linalg.norm(course[after] - truth[after, 1], axis=1)
+    off_line = np.linalg.norm(straight - truth[after, 1], axis=1)
+    assert on_circle[-1] < off_line[-1] / 4, (on_circle[-1], off_line[-1])
+
+
+def test_a_lone_joints_course_goes_on_straight_once_a_neighbour_is_lost():
+    """The wrist lost too, mid-course: the elbow's course goes on from where it was at its step, without a jump."""
+    rate_hz, lost_at, wrist_lost_at = 120.0, 20, 24
+    course, running, truth = _swing(rate_hz, lost_at, wrist_lost_at)
+    assert running[wrist_lost_at:wrist_lost_at + 3].all()
+    markers_step = truth[lost_at - 1, 1] - truth[lost_at - 2, 1]  # the course's step
+    steps = np.diff(course[wrist_lost_at - 1:wrist_lost_at + 3], axis=0)
+    np.testing.assert_allclose(steps, np.tile(markers_step, (3, 1)), atol=1e-12)
+    turned = np.diff(course[lost_at:wrist_lost_at], axis=0)  # (before, the circle turned it)
+    assert np.linalg.norm(turned[-1] - markers_step) > 1e-3
