@@ -99,8 +99,8 @@ def test_returning_markers_are_met_without_a_step_known_answer():
 
 @pytest.mark.parametrize("speed", [0.5, 3.0])  # m/s: 5 and 30 mm a frame at 100 Hz
 def test_a_step_caps_how_fast_the_offset_closes_or_half_the_joints_own_step(speed):
-    """reacquire_step_m caps the blend's own move a frame; a joint moving faster than twice that may be met or
-    left at half its own step (PACE_SHARE), so a fast one does not fall behind its fill (stop 29)."""
+    """reacquire_step_m caps the blend's own move a frame; a joint moving faster than four times that may be met
+    or left at a quarter of its own step (PACE_SHARE), so a fast one does not fall behind its fill (stop 29)."""
     rate_hz, step = 100.0, 0.002
     velocity = np.array([speed, 0.0, 0.0])
     bias = lambda f: np.array([0.0, 0.3, 0.0])  # noqa: E731  (far enough for the cap to bind)
