@@ -605,6 +605,10 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
             offset_vel[k] = 0.0
             raw_vel[k] = 0.0
             since_loss[k] = math.inf
+            # nothing to measure the next steps from (the source's acceleration, the spike test): the position
+            # from before this frame, kept, made the next two frames' samples a two-frame and a one-frame step
+            last_raw[k] = np.nan
+            trust[k, LOCATED_RUN] = 0
         elif omega > 0:
             was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
             neighbours[:] = np.nan

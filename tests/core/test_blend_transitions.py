@@ -459,3 +459,24 @@ def test_a_lone_joints_course_goes_on_straight_once_a_neighbour_is_lost():
     np.testing.assert_allclose(steps, np.tile(markers_step, (3, 1)), atol=1e-12)
     turned = np.diff(course[lost_at:wrist_lost_at], axis=0)  # (before, the circle turned it)
     assert np.linalg.norm(turned[-1] - markers_step) > 1e-3
+
+
+def test_a_missing_frame_leaves_no_stale_step_behind():
+    """A joint missing for a frame (no source at all) has nothing to measure its next step from: at a steady
+    2 m/s the acceleration the course weight learns from stays 0 across it, and the output goes on with its
+    source. (Before stop 31 the position from before the missing frame was kept: the next two frames' samples
+    were a two-frame step and a one-frame step taken for accelerations, 480 and 240 m/s² at 120 Hz.)"""
+    rate_hz, velocity = 120.0, np.array([2.0, 0.0, 0.0])
+    blend = af.BlendState.empty(1, 0.0, HALF_LIFE)
+    for f in range(30):
+        blend.advance_clock(f / rate_hz)
+        missing = f == 15
+        positions = (START + velocity * f / rate_hz).reshape(1, 3)
+        positions = np.full((1, 3), np.nan) if missing else positions.copy()
+        status = np.array([int(Status.MISSING) if missing else LOCATED], np.int64)
+        blend.blend(positions, status, np.array([0]))
+        if not missing:
+            np.testing.assert_allclose(positions[0], START + velocity * f / rate_hz, atol=1e-12)
+    acc = blend.trust[0, af.ACC_SUM] / blend.trust[0, af.ACC_N]
+    assert blend.trust[0, af.ACC_N] >= 20
+    assert acc < 1e-6, acc
