@@ -74,6 +74,14 @@ FILL_SD_PRIOR = 0.01    # metres
 # quarter: 68, and 1.47x as before.
 PACE_SHARE = 0.25
 EASED = 0.999           # the weight at which the fill is taken whole
+# While a fill stands in for the markers, the output stays within this of it. The markers' course runs on
+# straight at their last step, and the step cap lets the output leave it at 10 mm a frame: a hand lost in a
+# strike at 65 mm a frame (karate, a whole arm hidden 1 s in every 2 s) flew 1.2 m off its held fill in 0.2 s,
+# and the offsets that came back with it, closed at the same cap, piled up gap after gap (2.0 m off on average,
+# 7.1 m at worst; dance2's hand 1.8 / 4.6 m). At 0.5 m: 0.23 / 0.84 m and 0.43 / 1.06 m, and not one figure of
+# the short-gap, long-gap or real-gap tables moved (it never binds there); at 0.3 m the Vicon take's kicking
+# ankle, whose held fill is the one that is wrong, went 117 -> 214 mm at worst.
+MAX_APART_M = 0.5
 # BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
 # where the markers came back and how many; frames located in a row.
 ACC_SUM, ACC_N, MISS_SQ, MISS_N, LOCATED_RUN = range(5)
@@ -537,6 +545,13 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         p[:] = course[k] + eased[k] * (p - course[k])
         if eased[k] == 1.0:
             since_loss[k] = math.inf
+    apart = vnorm(p - raw)
+    if s != LOCATED and apart > MAX_APART_M:  # (the course and the offset go on from there)
+        p[:] = raw + (p - raw) * (MAX_APART_M / apart)
+        offset[k] = p - raw
+        offset_vel[k] = 0.0
+        if since_loss[k] < math.inf:
+            course[k] = p
 
 
 @njit(cache=True)
@@ -585,7 +600,8 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
     then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
     hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones
-    keeps its distances to them, on their circle (stop 30). A flickering marker swings the offset back and forth
+    keeps its distances to them, on their circle (stop 30). While a fill stands in, the output stays within MAX_APART_M
+    of it (stop 31). A flickering marker swings the offset back and forth
     by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source

@@ -480,3 +480,20 @@ def test_a_missing_frame_leaves_no_stale_step_behind():
     acc = blend.trust[0, af.ACC_SUM] / blend.trust[0, af.ACC_N]
     assert blend.trust[0, af.ACC_N] >= 20
     assert acc < 1e-6, acc
+
+
+def test_the_output_stays_within_reach_of_a_fill_that_stands_still():
+    """A joint lost at 5 m/s whose fill stays where the markers went (a held hand): the markers' course runs
+    on at 42 mm a frame, the step cap lets the output leave it at 10, and without a bound it went 1.0 m off
+    its fill. It stays within MAX_APART_M of the fill, and once the markers are back it closes on
+    them at the cap, never further off than when they came back."""
+    rate_hz, loss, back = 120.0, 20, 120
+    fast = np.array([5.0, 0.0, 0.0])
+    frozen = lambda f: -fast * (f - loss) / rate_hz  # the source stays where the markers were lost
+    out, truth = run(rate_hz, range(loss, back), step=0.01, frames=200, bias=frozen, velocity=fast,
+                     fill=lambda f: HELD)
+    source = truth + np.array([frozen(f) if loss <= f < back else np.zeros(3) for f in range(200)])
+    apart = np.linalg.norm(out - source, axis=1)
+    assert apart[loss:back].max() == pytest.approx(af.MAX_APART_M)  # it binds, and holds
+    assert apart[back:].max() <= apart[back] + 1e-9
+    assert np.diff(apart[back:back + 20]).max() < 0
