@@ -497,3 +497,15 @@ def test_the_output_stays_within_reach_of_a_fill_that_stands_still():
     assert apart[loss:back].max() == pytest.approx(af.MAX_APART_M)  # it binds, and holds
     assert apart[back:].max() <= apart[back] + 1e-9
     assert np.diff(apart[back:back + 20]).max() < 0
+
+
+def test_a_fill_further_off_than_the_bound_takes_over_without_a_twitch():
+    """A fill 0.8 m off the truth where the markers go (past MAX_APART_M) is met as any other: the output goes
+    on at the joint's own step there, and then only never drifts further from the fill than that."""
+    rate_hz, loss = 120.0, 20
+    far = np.array([0.0, 0.8, 0.0])
+    out, truth = run(rate_hz, range(loss, 10_000), step=0.01, frames=120, bias=lambda f: far)
+    np.testing.assert_allclose(out[loss] - out[loss - 1], VELOCITY / rate_hz, atol=1e-9)
+    apart = np.linalg.norm(out - (truth + far), axis=1)
+    assert apart[loss] == pytest.approx(0.8)
+    assert apart[loss:].max() <= 0.8 + 1e-9
