@@ -57,12 +57,30 @@ results-blend: $(STAMP)
 # The gap-filling options beyond the thesis that the studio graphs use (gapfill.BEYOND_THESIS), as flags of
 # `mocap eval gaps`, with constraints on and the markers removed; a run adds its landmark fills
 # (--rebuild, --pose-memory).
-GAPS_BEYOND_NO_BLEND := --constraints on --mode markers --swivel --segment-carry --limb-memory --learned-lengths --body-model \
+GAPS_OPTIONS := --constraints on --mode markers --swivel --segment-carry --limb-memory --learned-lengths --body-model \
 	--reacquire-step 0.01
+GAPS_BEYOND_NO_BLEND := $(GAPS_OPTIONS) --end-model
 GAPS_BEYOND := $(GAPS_BEYOND_NO_BLEND) --blend-half-life 0.1
+GAPS_BEYOND_NO_END := $(GAPS_OPTIONS) --blend-half-life 0.1
+
+# A whole limb lost (elbow, wrist and hand; knee, ankle, foot and toe) 1 s in every 2 s, three ways: the thesis's
+# method, the studio options without the end model, and with it. $(1): take, profile, limb, window; $(2): report
+# name; $(3): the landmark fills.
+define whole_limb
+	$(BIN)/mocap eval gaps --gap-length 1 --gap-every 2 --solvers ccd $(1) --constraints on --mode markers --no-plots \
+		--report docs/results/limb_$(2)_thesis
+	$(BIN)/mocap eval gaps --gap-length 1 --gap-every 2 --solvers ccd $(1) $(GAPS_BEYOND_NO_END) $(3) --no-plots \
+		--report docs/results/limb_$(2)_no_end_model
+	$(BIN)/mocap eval gaps --gap-length 1 --gap-every 2 --solvers ccd $(1) $(GAPS_BEYOND) $(3) --report docs/results/limb_$(2)_studio
+endef
 
 results-beyond: $(STAMP)
 	$(BIN)/mocap eval timing --constraints on --beyond --report docs/results/timing_beyond
+	$(call whole_limb,--remove elbow_l$(,)wrist_l$(,)hand_l --from 1,arm_sprint,--rebuild)
+	$(call whole_limb,--take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 --remove elbow_l$(,)wrist_l$(,)hand_l --from 1 --to 20,arm_karate,--rebuild)
+	$(call whole_limb,--take $(DANCE):walk2 --profile dance28 --remove elbow_l$(,)wrist_l$(,)hand_l --from 1,arm_walk2,)
+	$(call whole_limb,--take $(DANCE):dance2 --profile dance28 --remove elbow_r$(,)wrist_r$(,)hand_r --from 1,arm_dance2,)
+	$(call whole_limb,--take $(DANCE):walk1 --profile dance28 --remove knee_l$(,)ankle_l$(,)foot_l$(,)toe_l --from 1,leg_walk1,--pose-memory)
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 $(GAPS_BEYOND) --report docs/results/knee_ankle_dance_beyond
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \

@@ -66,6 +66,7 @@ def add_parser(sub) -> None:
     g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
     g.add_argument("--limb-memory", action="store_true", help=BEYOND_THESIS_HELP["limb_memory"])
     g.add_argument("--body-model", action="store_true", help=BEYOND_THESIS_HELP["body_model"])
+    g.add_argument("--end-model", action="store_true", help=BEYOND_THESIS_HELP["end_model"])
     g.add_argument("--learned-lengths", action="store_true", help=BEYOND_THESIS_HELP["learned_lengths"])
     g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
     g.add_argument("--pose-memory", action="store_true", help=POSE_MEMORY_HELP)
@@ -192,6 +193,7 @@ def run_gaps(args) -> int:
                             fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
                                           "segment_carry": args.segment_carry, "limb_memory": args.limb_memory,
                                           "learned_lengths": args.learned_lengths, "body_model": args.body_model,
+                                          "end_model": args.end_model,
                                           "blend_half_life_s": args.blend_half_life, "blend_course": args.blend_course},
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
@@ -321,7 +323,7 @@ def run_real_gaps(args) -> int:
 def options_text(args) -> str:
     on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
                                   ("--limb-memory", args.limb_memory), ("--learned-lengths", args.learned_lengths),
-                                  ("--body-model", args.body_model),
+                                  ("--body-model", args.body_model), ("--end-model", args.end_model),
                                   ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory)) if flag]
     if args.reacquire_step:
         on.append(f"--reacquire-step {args.reacquire_step}")

@@ -32,7 +32,12 @@ from mocap_core.skeleton import END_SITES, INDEX, JOINTS
 BODY_MODEL_HELP = ("beyond the thesis: a lone lost elbow or knee turned on its swivel circle towards where a "
                    "regression from the rest of the located body, learned online from this limb and the other "
                    "(mirrored), puts it (with swivel)")
+END_MODEL_HELP = ("beyond the thesis: a limb lost from its first joint down (elbow, wrist and hand; knee, ankle and "
+                  "foot) has its end put where a regression from the rest of the located body, learned online from "
+                  "this limb and the other (mirrored), puts it, and the joints between aim at it; the thesis held the "
+                  "lost limb as it was relative to its parent")
 MODELLED = frozenset({"elbow_l", "elbow_r", "knee_l", "knee_r"})
+MODELLED_ENDS = frozenset({"wrist_l", "wrist_r", "ankle_l", "ankle_r"})  # the end model's
 RIDGE = 10.0          # on standardized features (prototype: 1, 10 and 30 within 1.5 mm on dance2, 300 worse)
 MIN_SAMPLES = 60      # poses before the model is trusted (one second at 60 Hz)
 REFIT_SAMPLES = 60    # new poses before the model is refitted, when it is needed (prototype: every 30 frames)
@@ -53,14 +58,20 @@ SWAPPED = np.array([INDEX[j[:-1] + {"l": "r", "r": "l"}[j[-1]]] if j[-2:] in ("_
 
 
 class BodyModel:
-    """One limb's model of its middle joint ``k`` (the elbow or the knee): ``idx`` the limb's chain,
-    ``other`` the other limb's (the same length), ``parent`` the limb parent's joint index."""
+    """One limb's model of its joint ``k`` (chain index), from the limb's joint ``root`` (default k - 1):
+    ``idx`` the limb's chain, ``other`` the other limb's (the same length), ``parent`` the limb parent's joint
+    index. With the default root, ``k`` is the middle joint (the elbow, the knee), lost alone between two
+    located ones, and the features include the next joint's frame. With a root further up, ``k`` is the
+    limb's end (the wrist, the ankle), lost with every joint between the two (end_model): none of them, on
+    either limb, is a feature."""
 
-    def __init__(self, idx: np.ndarray, other: np.ndarray, k: int, parent: int):
-        self.idx, self.other, self.k, self.parent = idx, other, k, parent
-        excluded = {int(idx[k]), int(other[k])} | REPEATED
+    def __init__(self, idx: np.ndarray, other: np.ndarray, k: int, parent: int, root: int | None = None):
+        root = k - 1 if root is None else root
+        self.idx, self.other, self.k, self.parent, self.root = idx, other, k, parent, root
+        self.with_next = root == k - 1
+        excluded = {int(c[j]) for c in (idx, other) for j in range(root + 1, k + 1)} | REPEATED
         self.features = np.array([j for j in range(len(JOINTS)) if j not in excluded], np.int64)
-        d = 3 * len(self.features) + 6
+        d = 3 * len(self.features) + (6 if self.with_next else 0)
         self.n = np.zeros(1)
         self.sx, self.sy = np.zeros(d), np.zeros(3)
         self.sxx, self.sxy = np.zeros((d, d)), np.zeros((d, 3))
@@ -70,8 +81,21 @@ class BodyModel:
         self.mu = self.sd = self.coef = self.chol = self.y_mean = None
 
     def learn(self, positions, frames, status) -> None:
-        _learn(positions, frames, status, self.idx, self.other, self.k, self.parent, self.features, self.x,
-               self.n, self.sx, self.sy, self.sxx, self.sxy)
+        _learn(positions, frames, status, self.idx, self.other, self.k, self.root, self.with_next, self.parent,
+               self.features, self.x, self.n, self.sx, self.sy, self.sxx, self.sxy)
+
+    def lost(self, status) -> bool:
+        """Whether this frame asks the model: its joint missing; as the middle joint, both neighbours not;
+        as the end, every joint from the root's next on missing and the root not (no joint below to aim at)."""
+        idx, k = self.idx, self.k
+        if status[idx[self.root]] == MISSING:
+            return False
+        if self.with_next:
+            return status[idx[k]] == MISSING and status[idx[k + 1]] != MISSING
+        for j in range(self.root + 1, len(idx)):
+            if status[idx[j]] != MISSING:
+                return False
+        return True
 
     def predict(self, positions, frames, status, frame_s: float) -> tuple[np.ndarray, float]:
         """(where the model puts the joint, world; the weight of its turn), or (NaNs, 0) without a model.
@@ -80,18 +104,17 @@ class BodyModel:
         k, idx = self.k, self.idx
         if status[idx[k]] != MISSING:
             self.last_local[:] = np.nan
-        if status[idx[k]] != MISSING or status[idx[k - 1]] == MISSING or status[idx[k + 1]] == MISSING:
-            return none
-        if self.n[0] < MIN_SAMPLES:
+        if not self.lost(status) or self.n[0] < MIN_SAMPLES:
             return none
         if self.n[0] - self.fitted_at >= REFIT_SAMPLES or self.fitted_at < 0:
             self._fit()
-        if not _features(positions, frames, status, idx, k, self.parent, self.features, False, self.mu, self.x):
+        if not _features(positions, frames, status, idx, k, self.root, self.with_next, self.parent, self.features,
+                         False, self.mu, self.x):
             return none
         leverage = _predict(self.x, self.mu, self.sd, self.chol, self.coef, self.y_mean, self.local)
         _cap_step(self.local, self.last_local, MAX_SPEED_M_S * frame_s)
         self.last_local[:] = self.local
-        point = positions[idx[k - 1]] + frames[self.parent] @ self.local
+        point = positions[idx[self.root]] + frames[self.parent] @ self.local
         return point, MAX_WEIGHT / (1.0 + leverage / LEVERAGE_SCALE)
 
     def _fit(self) -> None:
@@ -181,19 +204,20 @@ def _predict(x, mu, sd, chol, coef, y_mean, local):
 
 
 @njit(cache=True)
-def _features(positions, frames, status, chain, k, parent, features, mirrored, fallback, x):
+def _features(positions, frames, status, chain, k, root_k, with_next, parent, features, mirrored, fallback, x):
     """This frame's feature vector into x, from ``chain``'s view (mirrored: the other limb's, as if it
-    were this one). Joints that are not located take ``fallback`` (the model's means), or, without
-    one, make the frame unusable. False when the frame has no usable reference. (Written out without
-    temporaries: it runs twice a frame per limb.)"""
+    were this one): the feature joints from the chain's ``root_k`` joint, and with ``with_next`` the y and z
+    axes of the joint after ``k``. Joints that are not located take ``fallback`` (the model's means), or,
+    without one, make the frame unusable. False when the frame has no usable reference. (Written out
+    without temporaries: it runs twice a frame per limb.)"""
     ref = frames[parent]
-    root = positions[chain[k - 1]]
+    root = positions[chain[root_k]]
     if not (all_finite(ref) and all_finite(root)):
         return False
     sx = -1.0 if mirrored else 1.0  # a mirror negates the parent frame's x (the subject's left)
-    nxt = frames[chain[k + 1]]
+    nxt = frames[chain[k + 1]] if with_next else ref
     m = features.shape[0]
-    for i in range(m + 2):
+    for i in range(m + 2 if with_next else m):
         if i < m:  # a joint, from the limb's first joint
             j = SWAPPED[features[i]] if mirrored else features[i]
             usable = status[j] == LOCATED
@@ -213,14 +237,15 @@ def _features(positions, frames, status, chain, k, parent, features, mirrored, f
 
 
 @njit(cache=True)
-def _learn(positions, frames, status, idx, other, k, parent, features, x, n, sx, sy, sxx, sxy):
+def _learn(positions, frames, status, idx, other, k, root_k, with_next, parent, features, x, n, sx, sy, sxx, sxy):
     for src in range(2):
         chain = idx if src == 0 else other
-        if status[chain[k - 1]] != LOCATED or status[chain[k]] != LOCATED or status[chain[k + 1]] != LOCATED:
+        if status[chain[root_k]] != LOCATED or status[chain[k]] != LOCATED or \
+                (with_next and status[chain[k + 1]] != LOCATED):
             continue
-        if not _features(positions, frames, status, chain, k, parent, features, src == 1, None, x):
+        if not _features(positions, frames, status, chain, k, root_k, with_next, parent, features, src == 1, None, x):
             continue
-        y = mtv(frames[parent].copy(), positions[chain[k]] - positions[chain[k - 1]])
+        y = mtv(frames[parent].copy(), positions[chain[k]] - positions[chain[root_k]])
         if not all_finite(y):  # a "located" joint without a position: one NaN would spoil the sums for good
             continue
         if src == 1:

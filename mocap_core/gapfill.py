@@ -27,7 +27,7 @@ from numba import njit
 
 from mocap_core import analytic_fill as af
 from mocap_core.analytic_fill import all_finite
-from mocap_core.body_model import BODY_MODEL_HELP, MODELLED, BodyModel
+from mocap_core.body_model import BODY_MODEL_HELP, END_MODEL_HELP, MODELLED, MODELLED_ENDS, BodyModel
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
@@ -49,7 +49,7 @@ LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
 # The gap-filling options beyond the thesis, as the studio launch files, `mocap solve` and
 # `mocap eval timing --beyond` use them (README "Results").
 BEYOND_THESIS = {"swivel": True, "segment_carry": True, "limb_memory": True, "learned_lengths": True,
-                 "body_model": True, "reacquire_step_m": 0.01, "blend_half_life_s": 0.1}
+                 "body_model": True, "end_model": True, "reacquire_step_m": 0.01, "blend_half_life_s": 0.1}
 # What each of them does, said once for the node's params and `mocap eval gaps --help`.
 BEYOND_THESIS_HELP = {
     "swivel": "beyond the thesis: missing joints between two located ones from bone lengths and the swivel "
@@ -62,6 +62,7 @@ BEYOND_THESIS_HELP = {
     "reacquire_step_m": "beyond the thesis: close the gap to returning markers by at most this many metres a "
                         "frame (0 = the thesis's method: jump)",
     "body_model": BODY_MODEL_HELP,
+    "end_model": END_MODEL_HELP,
     "blend_half_life_s": "beyond the thesis: when a joint's markers are lost or come back, go on where the joint "
                          "was heading and let the offset to the new source die out as a critically damped spring "
                          "that halves it in this many seconds (0 = off: a jump at loss)",
@@ -71,6 +72,8 @@ BEYOND_THESIS_HELP = {
 }
 # The limb whose poses, mirrored, each limb also remembers (limb memory).
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
+# A predicted end is put at most this share of the limb's reach from its root: the joints between stay bent.
+REACH_SHARE = 0.99
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
 CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 
@@ -90,7 +93,8 @@ class LimbFiller:
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
                  segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True):
+                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True,
+                 end_model: bool = False):
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -137,6 +141,13 @@ class LimbFiller:
         self.body_model = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) \
             if body_model and other_idx is not None and middle else None
         self.modelled, self.model_weight = np.full((n, 3), np.nan), np.zeros(n)
+        # The end model (issue 9's "a lost end effector is predicted from the rest of the body"): a limb lost from
+        # its first joint down (elbow, wrist and hand; knee, ankle and foot) has its end put where the same kind
+        # of regression puts it, learned from the wrist's (ankle's) place from the shoulder (hip); the joints
+        # between then aim at it. Algorithm 1 held the limb as it was relative to its parent.
+        ends = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED_ENDS]
+        self.end_model = BodyModel(self.joints, other_idx, ends[0], self.parent_of_root, root=middle[0] - 1) \
+            if end_model and other_idx is not None and middle and ends else None
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
@@ -152,6 +163,8 @@ class LimbFiller:
         self.blend.advance_clock(time_s)
         out = np.zeros(4)
         idx, prev_pos, prev_frames = self.joints, self.prev_pos, self.prev_frames
+        if self.end_model is not None:  # (before the carry, which would hold the whole lost limb with the clavicle)
+            out[0] += self._predict_end(positions, frames, status)
         if self.carried is not None and self.has_prev[0]:
             out[0] += af.segment_carry(positions, frames, status, idx, self.carried, prev_pos, prev_frames)
             out[1] += af.carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames)
@@ -179,6 +192,26 @@ class LimbFiller:
             self.blend.blend(positions, status, idx)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
+
+    def _predict_end(self, positions, frames, status) -> int:
+        """The end model's point for a limb lost from its first joint down, within the limb's reach; 1 if put."""
+        model = self.end_model
+        model.learn(positions, frames, status)
+        if not self.has_prev[0]:
+            return 0
+        point, _ = model.predict(positions, frames, status, self.blend.frame_s)
+        if not all_finite(point):
+            return 0
+        idx, root, k = self.joints, model.root, model.k
+        reach = sum(af._length(self.lengths, j, float(np.linalg.norm(self.prev_pos[j + 1] - self.prev_pos[j])))
+                    for j in range(root, k))  # the bones as the swivel takes them
+        out = point - positions[idx[root]]
+        size = float(np.linalg.norm(out))
+        if size > reach:  # a bent limb's joints cannot be placed between root and an end out of reach
+            point = positions[idx[root]] + out * (REACH_SHARE * reach / size)
+        positions[idx[k]] = point
+        status[idx[k]] = ESTIMATED
+        return 1
 
     def _model(self, positions, frames, status) -> None:
         model = self.body_model
@@ -261,10 +294,12 @@ class GapFiller:
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
                  segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True):
+                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True,
+                 end_model: bool = False):
         constraints = constraints if constraints is not None else load_constraints()
         self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel, segment_carry,
-                                       limb_memory, learned_lengths, blend_half_life_s, body_model, blend_course)
+                                       limb_memory, learned_lengths, blend_half_life_s, body_model, blend_course,
+                                       end_model)
                       for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:

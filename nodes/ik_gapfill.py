@@ -34,6 +34,7 @@ class Params(BaseModel):
     limb_memory: bool = Field(False, description=BEYOND_THESIS_HELP["limb_memory"])
     learned_lengths: bool = Field(False, description=BEYOND_THESIS_HELP["learned_lengths"])
     body_model: bool = Field(False, description=BEYOND_THESIS_HELP["body_model"])
+    end_model: bool = Field(False, description=BEYOND_THESIS_HELP["end_model"])
     reacquire_step_m: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["reacquire_step_m"])
     blend_half_life_s: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["blend_half_life_s"])
     blend_course: bool = Field(True, description=BEYOND_THESIS_HELP["blend_course"])
@@ -62,7 +63,7 @@ class IkGapfill(Node):
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
                                  load_constraints(p.constraints_file), p.reacquire_step_m, p.swivel,
                                  p.segment_carry, p.limb_memory, p.learned_lengths, p.blend_half_life_s,
-                                 p.body_model, p.blend_course)
+                                 p.body_model, p.blend_course, p.end_model)
         self.names = list(LIMB_CHAINS[p.limb])
 
     def on_message(self, topic, msg: SkeletonFrame) -> None:
