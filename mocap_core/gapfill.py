@@ -148,6 +148,8 @@ class LimbFiller:
         ends = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED_ENDS]
         self.end_model = BodyModel(self.joints, other_idx, ends[0], self.parent_of_root, root=middle[0] - 1) \
             if end_model and other_idx is not None and middle and ends else None
+        self.end_local = np.full(3, np.nan)  # the lost end's offset from the root where the gap began
+        self.end_seen = False                 # and whether its markers were the end's last source
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if segment_carry else None
@@ -197,12 +199,23 @@ class LimbFiller:
         """The end model's point for a limb lost from its first joint down, within the limb's reach; 1 if put."""
         model = self.end_model
         model.learn(positions, frames, status)
-        if not self.has_prev[0]:
-            return 0
-        point, _ = model.predict(positions, frames, status, self.blend.frame_s)
-        if not all_finite(point):
-            return 0
         idx, root, k = self.joints, model.root, model.k
+        if status[idx[k]] != MISSING:  # seen, or put by the hip stage's fills (the leg hinge, say)
+            self.end_seen = status[idx[k]] == af.LOCATED
+        # a limb whose better fill drops out for a few frames is held as that fill left it, not handed to the
+        # model and back (the Vicon take's kicking leg, its hinge gone for 4 frames: 25 frames 100-150 mm worse)
+        if not self.has_prev[0] or not (self.end_seen or all_finite(self.end_local)):
+            return 0
+        point, weight = model.predict(positions, frames, status, self.blend.frame_s)
+        if not all_finite(point):
+            self.end_local[:] = np.nan
+            return 0
+        parent = frames[self.parent_of_root]
+        if not all_finite(self.end_local):  # the gap begins: the end as it was, in the limb parent's frame
+            self.end_local[:] = self.prev_parent_frame.T @ (self.prev_pos[k] - self.prev_pos[root])
+        held = positions[idx[root]] + parent @ self.end_local
+        if all_finite(held):  # a pose unlike those learned moves the end less far from where it was held
+            point = held + weight * (point - held)
         reach = sum(af._length(self.lengths, j, float(np.linalg.norm(self.prev_pos[j + 1] - self.prev_pos[j])))
                     for j in range(root, k))  # the bones as the swivel takes them
         out = point - positions[idx[root]]
