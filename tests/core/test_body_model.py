@@ -2,8 +2,15 @@
 import numpy as np
 
 from mocap_core.body_model import MAX_SPEED_M_S, MAX_WEIGHT, MIN_SAMPLES, BodyModel
-from mocap_core.gapfill import LimbFiller
+from mocap_core.experiments import gap_run
+from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
+from mocap_core.hip_interpolation import HipInterpolator
+from mocap_core.localization import Localizer
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.profiles import LANDMARK_INDEX, load_profile
+from mocap_core.recordings import read_recording
 from mocap_core.skeleton import INDEX, JOINTS, N_JOINTS, Status
+from tests.conftest import data_file
 from tests.core.test_learned_lengths import dance_left_elbow_hidden
 
 MIRROR = np.array([-1.0, 1.0, 1.0])
@@ -193,11 +200,6 @@ def test_the_end_model_puts_a_lost_arms_wrist_by_the_other_arms_rule_known_answe
 def walk2_left_arm_lost():
     """walk2 of the 28-marker set, the left arm's markers (elbow, both wrist styloids, hand) hidden 1 s in every
     2 s from 1 s: (the reference, the localized take with them hidden, the hidden frames)."""
-    from mocap_core.hip_interpolation import HipInterpolator
-    from mocap_core.localization import Localizer
-    from mocap_core.profiles import LANDMARK_INDEX, load_profile
-    from mocap_core.recordings import read_recording
-    from tests.conftest import data_file
     rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "walk2")
     prof = load_profile("dance28")
     lm, _ = HipInterpolator().fill_landmarks(prof.resolve(rec.labels).apply(rec.positions))
@@ -217,7 +219,6 @@ def test_the_end_model_on_a_walkers_lost_arm():
     girdle, segment carry's), the walker's swinging wrist was 182 mm off on average, the elbow 79; put where the
     end model has it, the rest of the arm aiming at it, 78 and 38 mm. The wrist is estimated and the hand,
     beyond it, held."""
-    from mocap_core.gapfill import BEYOND_THESIS
     truth, loc, hidden = walk2_left_arm_lost()
     mean = {}
     for on in (False, True):
@@ -241,12 +242,6 @@ def test_a_leg_whose_hinge_drops_out_is_held_not_handed_to_the_end_model():
     In the hip-height kick every foot marker is lost too, and for 4 frames (1011-1014) the hinge has nothing
     to put the leg by: the whole leg is missing there. It was last put by the hinge, not by its markers, so
     the end model leaves it held: handed to the model and back, 25 frames came out 100-150 mm worse."""
-    from mocap_core.experiments import gap_run
-    from mocap_core.gapfill import BEYOND_THESIS
-    from mocap_core.pipeline import SkeletonPipeline
-    from mocap_core.profiles import load_profile
-    from mocap_core.recordings import read_recording
-    from tests.conftest import data_file
     rec = read_recording(data_file("12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"))
     prof = load_profile("vicon53")
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
