@@ -252,3 +252,24 @@ def test_a_leg_whose_hinge_drops_out_is_held_not_handed_to_the_end_model():
                         tracking=pipe.landmark_map.tracking(rec.positions), tracking_of=pipe.landmark_map.tracking_of,
                         rate_hz=rec.rate_hz) for on in (False, True)}
     np.testing.assert_allclose(runs[True].error_m, runs[False].error_m, atol=1e-9)
+
+
+def test_a_nan_flood_leaves_the_end_model_working():
+    """Twenty frames of a malformed source mid-take (every joint "located" at NaN, then every joint missing):
+    the end model learns nothing from them, its sums stay finite, and the left arm lost afterwards is still put
+    where it predicts."""
+    truth, loc, hidden = walk2_left_arm_lost()
+    pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
+    flood = slice(130, 150)  # in a second that shows the arm whole
+    assert not hidden[flood].any()
+    pos[flood] = np.nan
+    status[130:140] = Status.LOCATED
+    status[140:150] = Status.MISSING
+    filler = LimbFiller("left_arm", **(BEYOND_THESIS | {"end_model": True}))
+    learned = []
+    for f in range(len(pos)):
+        filler.fill(pos[f], frames[f], status[f], f / 60.0)
+        learned.append(filler.end_model.n[0])
+    assert learned[149] == learned[129] and np.isfinite(filler.end_model.sxx).all()
+    late = hidden & (np.arange(len(pos)) > 200)
+    assert (status[late, INDEX["wrist_l"]] == Status.ESTIMATED).all() and np.isfinite(pos[late]).all()
