@@ -217,8 +217,8 @@ def walk2_left_arm_lost():
 def test_the_end_model_on_a_walkers_lost_arm():
     """walk2, the whole left arm hidden 1 s in every 2 s, the studio's options: held as it was (with the shoulder
     girdle, segment carry's), the walker's swinging wrist was 182 mm off on average, the elbow 79; put where the
-    end model has it, the rest of the arm aiming at it, 78 and 38 mm. The wrist is estimated and the hand,
-    beyond it, held."""
+    end model has it once the gap has lasted 0.2 s, the rest of the arm aiming at it, 88 and 42 mm. The wrist
+    is then estimated and the hand, beyond it, held; before that the arm is held."""
     truth, loc, hidden = walk2_left_arm_lost()
     mean = {}
     for on in (False, True):
@@ -228,13 +228,15 @@ def test_the_end_model_on_a_walkers_lost_arm():
             filler.fill(pos[f], frames[f], status[f], f / 60.0)
         mean[on] = {j: np.linalg.norm(pos[hidden, INDEX[j]] - truth[hidden, INDEX[j]], axis=1).mean()
                     for j in ("elbow_l", "wrist_l")}
-        if on:
-            late = hidden & (np.arange(len(pos)) > 60 + 5)  # (the model needs its first second of poses)
+        if on:  # once the gap has lasted END_WAIT_S (0.2 s, 12 frames)
+            late = hidden & ((np.arange(len(pos)) - 60) % 120 >= 12)
             assert (status[late, INDEX["wrist_l"]] == Status.ESTIMATED).all()
             assert (status[late, INDEX["hand_l"]] == Status.HELD).all()
+            early = hidden & ((np.arange(len(pos)) - 60) % 120 < 11)
+            assert (status[early, INDEX["wrist_l"]] == Status.HELD).all()
     show = {on: {j: round(e * 1000, 1) for j, e in m.items()} for on, m in mean.items()}
-    assert mean[True]["wrist_l"] < 0.45 * mean[False]["wrist_l"], show
-    assert mean[True]["elbow_l"] < 0.7 * mean[False]["elbow_l"], show
+    assert mean[True]["wrist_l"] < 0.5 * mean[False]["wrist_l"], show
+    assert mean[True]["elbow_l"] < 0.6 * mean[False]["elbow_l"], show
 
 
 def test_a_leg_whose_hinge_drops_out_is_held_not_handed_to_the_end_model():
@@ -271,5 +273,5 @@ def test_a_nan_flood_leaves_the_end_model_working():
         filler.fill(pos[f], frames[f], status[f], f / 60.0)
         learned.append(filler.end_model.n[0])
     assert learned[149] == learned[129] and np.isfinite(filler.end_model.sxx).all()
-    late = hidden & (np.arange(len(pos)) > 200)
-    assert (status[late, INDEX["wrist_l"]] == Status.ESTIMATED).all() and np.isfinite(pos[late]).all()
+    late = hidden & (np.arange(len(pos)) > 200) & ((np.arange(len(pos)) - 60) % 120 >= 12)
+    assert (status[late, INDEX["wrist_l"]] == Status.ESTIMATED).all() and np.isfinite(pos[hidden]).all()
