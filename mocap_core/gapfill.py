@@ -227,12 +227,13 @@ class LimbFiller:
         held = positions[idx[root]] + parent @ self.end_local
         if all_finite(held):  # a pose unlike those learned moves the end less far from where it was held
             point = held + weight * (point - held)
-        reach = sum(af._length(self.lengths, j, float(np.linalg.norm(self.prev_pos[j + 1] - self.prev_pos[j])))
-                    for j in range(root, k))  # the bones as the swivel takes them
+        bones = [af._length(self.lengths, j, float(np.linalg.norm(self.prev_pos[j + 1] - self.prev_pos[j])))
+                 for j in range(root, k)]  # as the swivel takes them
+        reach = REACH_SHARE * sum(bones)
         out = point - positions[idx[root]]
         size = float(np.linalg.norm(out))
         if size > reach:  # a bent limb's joints cannot be placed between root and an end out of reach
-            point = positions[idx[root]] + out * (REACH_SHARE * reach / size)
+            point = positions[idx[root]] + out * (reach / size)
         positions[idx[k]] = point
         status[idx[k]] = ESTIMATED
         return 1
