@@ -27,7 +27,7 @@ from numba import njit
 
 from mocap_core import analytic_fill as af
 from mocap_core.analytic_fill import all_finite
-from mocap_core.body_model import BODY_MODEL_HELP, END_MODEL_HELP, MODELLED, MODELLED_ENDS, BodyModel
+from mocap_core.body_model import BODY_MODEL_HELP, END_MODEL_HELP, END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
@@ -74,12 +74,6 @@ BEYOND_THESIS_HELP = {
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
 # A predicted end is put at most this share of the limb's reach from its root: the joints between stay bent.
 REACH_SHARE = 0.99
-# The end model takes a lost limb over only once the gap has lasted this long: before, the limb held as it was,
-# with the blend's course on the markers' last motion, does better (91 % of the Vicon take's real gaps last 0.1 s
-# or less). Every limb of eight takes hidden 1 s in every 2 s, the ends' means: at once 111 mm, after 0.15 / 0.2 /
-# 0.3 / 0.4 s 99 / 102 / 110 / 118 mm (the middle joints 70 -> 61-68); hidden 0.1 s in every 0.5 s, 20 mm at once
-# and the returns over 1.5x their normal step 3 -> 4, after 0.2 s as without the model (21 mm).
-END_WAIT_S = 0.2
 # Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
 CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 
