@@ -547,15 +547,15 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             since_loss[k] = math.inf
     # a fill further off than that where it takes over is met as ever; from there on the output only may not
     # drift further from it (clamping the frame it took over moved a karate ankle 84 mm, 2.5x its normal step)
-    apart = vnorm(p - raw)
-    reach = max(MAX_APART_M, vnorm(last_out[k] - before_raw))
-    if s != LOCATED and was != LOCATED and was != MISSING and not (gave_up or jumped or handed or spike) \
-            and apart > reach:  # (the course and the offset go on from there)
-        p[:] = raw + (p - raw) * (reach / apart)
-        offset[k] = p - raw
-        offset_vel[k] = 0.0
-        if since_loss[k] < math.inf:
-            course[k] = p
+    if s != LOCATED and was != LOCATED and was != MISSING and not (gave_up or jumped or handed or spike):
+        apart = vnorm(p - raw)
+        reach = max(MAX_APART_M, vnorm(last_out[k] - before_raw))
+        if apart > reach:  # (the course and the offset go on from there)
+            p[:] = raw + (p - raw) * (reach / apart)
+            offset[k] = p - raw
+            offset_vel[k] = 0.0
+            if since_loss[k] < math.inf:
+                course[k] = p
 
 
 @njit(cache=True)

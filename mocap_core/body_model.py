@@ -49,10 +49,10 @@ MIN_SAMPLES = 60      # poses before the model is trusted (one second at 60 Hz)
 REFIT_SAMPLES = 60    # new poses before the model is refitted, when it is needed (prototype: every 30 frames)
 MAX_WEIGHT = 0.5      # of the turn towards the model's point, at zero leverage
 LEVERAGE_SCALE = 2.0  # the weight is MAX_WEIGHT / (1 + leverage / LEVERAGE_SCALE) (prototype: 0.5-4 within 2 mm)
-# The end model's point is taken 1 / (1 + leverage / END_LEVERAGE_SCALE) of the way from where the end was held:
-# over every limb of eight takes hidden 1 s in every 2 s, the ends' means 109 -> 111 mm against the point taken
-# whole, the returns over 1.5x their normal step 5 -> 3 (the worst 4.5x -> 2.1x); 1 and 4: 114 and 110 mm.
-END_LEVERAGE_SCALE = 2.0
+# The end model's point is taken the same way, from where the end was held, with 1 in place of MAX_WEIGHT: over
+# every limb of eight takes hidden 1 s in every 2 s, the ends' means 109 -> 111 mm against the point taken whole,
+# the returns over 1.5x their normal step 5 -> 3 (the worst 4.5x -> 2.1x); a scale of 1 and 4: 114 and 110 mm.
+END_MAX_WEIGHT = 1.0
 # The model's point moves at most this fast in the limb parent's frame. On a fast move its leverage rises
 # and the linear model swings: dance2's left elbow, hidden 0.1 s in every 0.5 s, had its point 150 mm off
 # for two frames at 19 s, and the fill moved 1.60x its normal step at that loss. At 3 m/s: 0.75x, and
@@ -79,6 +79,7 @@ class BodyModel:
         root = k - 1 if root is None else root
         self.idx, self.other, self.k, self.parent, self.root = idx, other, k, parent, root
         self.with_next = root == k - 1
+        self.max_weight = MAX_WEIGHT if self.with_next else END_MAX_WEIGHT
         excluded = {int(c[j]) for c in (idx, other) for j in range(root + 1, k + 1)} | REPEATED
         self.features = np.array([j for j in range(len(JOINTS)) if j not in excluded], np.int64)
         d = 3 * len(self.features) + (6 if self.with_next else 0)
@@ -125,9 +126,7 @@ class BodyModel:
         _cap_step(self.local, self.last_local, MAX_SPEED_M_S * frame_s)
         self.last_local[:] = self.local
         point = positions[idx[self.root]] + frames[self.parent] @ self.local
-        if not self.with_next:
-            return point, 1.0 / (1.0 + leverage / END_LEVERAGE_SCALE)
-        return point, MAX_WEIGHT / (1.0 + leverage / LEVERAGE_SCALE)
+        return point, self.max_weight / (1.0 + leverage / LEVERAGE_SCALE)
 
     def _fit(self) -> None:
         self.mu, self.sd, self.y_mean, self.chol, self.coef = _fit(self.n[0], self.sx, self.sy, self.sxx, self.sxy)
