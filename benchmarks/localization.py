@@ -96,7 +96,8 @@ def leg_hinge_cost():
 
 def pose_memory_cost():
     """The pose memory full (CAPACITY poses a leg) and one knee and ankle recalled in every frame, the
-    ankle turned with the toe markers' line (the profile's tracking markers)."""
+    ankle turned with the toe markers' line (the profile's tracking markers), the knee's poses found by the
+    toe's velocity too (the frames' times)."""
     rec = read_recording(DATA / "13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat", "dance1")
     lmap = load_profile("dance28").resolve(rec.labels)
     lm, tracking = lmap.apply(rec.positions), lmap.tracking(rec.positions)
@@ -105,12 +106,12 @@ def pose_memory_cost():
     for f in range(CAPACITY + 100):  # the take's poses, jittered so that every one is kept
         frame = lm[f % len(lm)].copy()
         frame[LANDMARK_INDEX["L_FM2"]] += rng.normal(0, 0.01, 3)
-        memory.fill(frame, None, tracking[f % len(lm)])
+        memory.fill(frame, None, tracking[f % len(lm)], f / rec.rate_hz)
     lost = lm.copy()
     lost[:, [LANDMARK_INDEX["L_FLE"], LANDMARK_INDEX["L_FAL"]]] = np.nan
-    n = 300
-    seen = per_call_us(lambda i: memory.fill(lm[i].copy(), None, tracking[i]), n)
-    recalled = per_call_us(lambda i: memory.fill(lost[i].copy(), None, tracking[i]), n)
+    n, t0 = 300, (CAPACITY + 100) / rec.rate_hz
+    seen = per_call_us(lambda i: memory.fill(lm[i].copy(), None, tracking[i], t0 + i / rec.rate_hz), n)
+    recalled = per_call_us(lambda i: memory.fill(lost[i].copy(), None, tracking[i], t0 + i / rec.rate_hz), n)
     print(f"pose memory ({CAPACITY} poses a leg), us per frame: legs seen {seen:.1f}, "
           f"one leg's knee and ankle recalled {recalled:.1f}")
 

@@ -164,7 +164,9 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
     # the profile's landmarks: those the complete take has somewhere
     present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
-    lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present).fill_landmarks(lm, tracking)
+    frame_s = 1.0 / rate_hz if rate_hz else float("nan")
+    lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present).fill_landmarks(
+        lm, tracking, np.arange(len(lm)) * frame_s)
     loc = Localizer(profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if mode == "joint":
@@ -175,7 +177,6 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     p = params or SolverParams()
     filler = GapFiller(solver, SolverParams(p.max_iterations, p.stop_distance_m, constraints, p.escape_step_deg,
                                             p.escape_max_deg), **(fill_options or {}))
-    frame_s = 1.0 / rate_hz if rate_hz else float("nan")
     for f in range(len(pos)):
         filler.fill(pos[f], frames[f], status[f], f * frame_s)
     err = np.linalg.norm(pos[gap][:, jidx] - reference[gap][:, jidx], axis=-1)

@@ -26,21 +26,24 @@ class LandmarkFills:
         self.leg_hinge = hinge if hinge is not None and hinge.active else None
         self.memory = PoseMemory(present, tracking_of) if pose_memory else None
 
-    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray | None:
-        """One frame, in place; the mask of the landmarks filled, or None when no fill is on."""
+    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None, time_s: float = np.nan
+             ) -> np.ndarray | None:
+        """One frame, in place; the mask of the landmarks filled, or None when no fill is on. ``time_s``: the
+        frame's time (the pose memory finds poses by the toe's velocity too)."""
         filled = None
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking)
         if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
             filled |= self.leg_hinge.fill(landmarks, tracking, filled)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
-            recalled = self.memory.fill(landmarks, filled, tracking)
+            recalled = self.memory.fill(landmarks, filled, tracking, time_s)
             filled = recalled if filled is None else filled | recalled
         return filled
 
-    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Frames (F, n_landmarks, 3) -> the filled copy and the (F, n_landmarks) mask (None: no fill on)."""
+    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None,
+                       times_s: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Frames (F, n_landmarks, 3) -> the filled copy and the (F, n_landmarks) mask (None: no fill on);
+        ``times_s``: the frames' times."""
         filled = None
         if self.rebuilder is not None:
             if tracking is None and self.rebuilder.n_tracking:  # none given: the tracking markers are lost
@@ -50,6 +53,6 @@ class LandmarkFills:
             for f in range(len(landmarks)):
                 filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f], filled[f])
         if self.memory is not None:
-            landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking)
+            landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking, times_s)
             filled = recalled if filled is None else filled | recalled
         return landmarks, filled

@@ -63,7 +63,8 @@ class SkeletonPipeline:
                         ) -> SolvedChunk:
         """``tracking``: the profile's tracking markers of the same frames (landmark_map.tracking), which
         help rebuild lost limb landmarks (the rebuild is a gap fill: on with ``beyond`` and ``fill_gaps``)."""
-        landmarks, rebuilt = self.fills.fill_landmarks(landmarks, tracking)
+        times = (start + np.arange(len(landmarks))) * self.frame_s
+        landmarks, rebuilt = self.fills.fill_landmarks(landmarks, tracking, times)
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:

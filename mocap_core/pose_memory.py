@@ -20,6 +20,10 @@ how the foot is turned, which the toe's place alone does not: the ankle's offset
 remembered pose is turned as its foot's line is turned now (foot_line). Unless the two markers have
 come apart from their learned spacing: then a marker is wrong, and the offsets are taken as they were.
 
+Where the frames' times are known, the knee's poses are also looked for by where the toe is going: a walking
+toe passes each place twice a step, in the swing and in the stance, with the knee bent differently
+(VELOCITY_S). walk1's right knee 56 -> 42 mm.
+
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 pose of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
 leg what the other did before). Always pooled, they made the walks worse (the two legs' markers
@@ -93,6 +97,22 @@ FOOT_WIDTH_RATE = 1 / 100   # how fast the learned spacing follows the frames wh
 # 1.47 / 1.43x; the sixteen long-gap means 598-602 mm throughout. (The tolerance 0.1 / 0.3 with 20 frames:
 # 622 / 598 mm, 1.43 / 1.49x.)
 FOOT_SOUND_FRAMES = 20
+# The toe's velocity (in the pelvis frame) helps find the knee's poses. A walking toe passes each place twice a
+# step, forward in the swing and back (in the pelvis's frame) in the stance, with the knee bent differently each
+# time. A second search finds the poses by the toe's place and VELOCITY_S times its velocity (where it will be
+# VELOCITY_S from now; the velocity from one frame to the next), and the knee is the two searches' answers
+# weighted by how closely each one's poses agree (inverse variance): where the velocity tells nothing (a dancer
+# standing on one foot) its poses spread and the place's answer stays. The ankle is found by the place alone:
+# with the velocity the walks' ankles got worse (walk2 right 24 -> 31 mm), the foot's line turns it instead.
+# Knee+ankle hidden (joint level, studio options; the walks from 2 s to the end, the dances 5-15 s), the knee's
+# mean: walk1 left 42.8 -> 30.5 mm, right 56.1 -> 42.1, walk2 42.0 -> 36.9 and 45.5 -> 39.7; dance1 25.7 -> 23.2
+# (right) and 29.8 -> 31.2 (left), dance2 45.8 -> 44.5 and 34.3 -> 34.9; the ankles within 0.7 mm. The sixteen
+# means 602 -> 564 mm. Velocity alone for the knee: 570 (dance2 right's knee 34 -> 38); VELOCITY_S 0.08 / 0.25:
+# 574 / 577 (that alone); the velocity smoothed over frames (gain 0.5): 567 with the combination. With the
+# velocity, the knee's largest added move at return on short gaps (dance1, 0.1 s in every 0.5 s) is 1.44x its
+# normal step (1.36x before; 1.52x with the velocity alone).
+VELOCITY_S = 0.15
+MAX_STEP_S = 0.1  # frames further apart than this give no velocity (the last one is kept)
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
 
 
@@ -127,25 +147,28 @@ class PoseMemory:
         same = n == 2 and kinds[0] == kinds[1]
         self.mirror = np.array([1, 0] if same else [-1] * n, np.int64)
         # per leg, its own poses [0] and the other leg's, mirrored [1]:
-        self.toes = np.full((n, 2, CAPACITY, 3), np.inf)      # remembered toe positions (pelvis frame)
+        self.toes = np.full((n, 2, CAPACITY, 6), np.inf)      # remembered toes and VELOCITY_S x their velocity
         # and the targets then, and last the foot's line (unit; zero: not known), in the pelvis frame
         self.offsets = np.zeros((n, 2, CAPACITY, width + 1, 3))
         self.state = np.zeros((n, 2, 2), np.int64)           # poses kept, where the next one goes
-        self.last_kept = np.full((n, 2, 3), np.inf)          # the toe of the last pose kept
+        self.last_kept = np.full((n, 2, 6), np.inf)          # the key of the last pose kept
         self.last_seen = np.full((n, width, 3), np.nan)      # the targets of the last frame seen whole
         self.estimate = np.full((n, width, 3), np.nan)       # the smoothed targets during a gap (NaN: none)
         self.foot_width = np.full(n, np.nan)                 # the learned spacing of the foot's toe markers
         self.foot_sound = np.zeros(n, np.int64)              # and for how many frames it has held
+        self.toe_motion = np.full((n, 3, 3), np.nan)         # per leg: the last toe (pelvis frame), its velocity,
+        self.toe_motion[:, 1] = 0.0                          # and [2, 0] its time (no velocity yet: zero)
         self._nothing_filled: np.ndarray | None = None
         self._no_tracking, self._no_foot = np.zeros((0, 3)), np.full_like(self.foot, -1)
         self.pelvis_axes = np.zeros((3, 3))                  # the tracked pelvis frame (track_pelvis): its axes,
         self.pelvis_motion = np.zeros((4, 3))                # origin, step, turn per frame, and tracking or not
 
     def fill(self, landmarks: np.ndarray, filled: np.ndarray | None = None,
-             tracking: np.ndarray | None = None) -> np.ndarray:
+             tracking: np.ndarray | None = None, time_s: float = np.nan) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost; ``filled``: the landmarks an
         earlier stage estimated this frame (never learned from); ``tracking``: the profile's tracking
-        markers (n_tracking, 3; None: none given). Fills in place; returns the mask it filled."""
+        markers (n_tracking, 3; None: none given); ``time_s``: the frame's time (NaN: not known, and the
+        poses are found by the toe's place alone). Fills in place; returns the mask it filled."""
         if filled is None:
             if self._nothing_filled is None or len(self._nothing_filled) != len(landmarks):
                 self._nothing_filled = np.zeros(len(landmarks), np.bool_)
@@ -160,18 +183,19 @@ class PoseMemory:
         if len(self.legs):
             fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.toes, self.offsets, self.state,
                        self.last_kept, self.last_seen, self.estimate, out, self.pelvis_axes, self.pelvis_motion,
-                       tracking, foot, self.foot_width, self.foot_sound)
+                       tracking, foot, self.foot_width, self.foot_sound, self.toe_motion, float(time_s))
         return out
 
     def fill_landmarks(self, landmarks: np.ndarray, filled: np.ndarray | None = None,
-                       tracking: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                       tracking: np.ndarray | None = None, times_s: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
         """Landmark frames (F, n_landmarks, 3) -> filled copy and the (F, n_landmarks) mask filled here;
-        ``tracking``: the tracking markers of the same frames (F, n_tracking, 3)."""
+        ``tracking``: the tracking markers of the same frames (F, n_tracking, 3); ``times_s``: their times."""
         out = np.array(landmarks, dtype=np.float64, copy=True)
         mask = np.zeros(out.shape[:2], bool)
         for f in range(out.shape[0]):
             mask[f] = self.fill(out[f], None if filled is None else filled[f],
-                                None if tracking is None else tracking[f])
+                                None if tracking is None else tracking[f], np.nan if times_s is None else times_s[f])
         return out, mask
 
 
@@ -236,16 +260,62 @@ def foot_line(tracking, pair, rot, learned):
 
 
 @njit(cache=True)
+def toe_velocity(motion, toe, time_s):
+    """``motion``: the leg's last toe, its velocity and [2, 0] the last time; updated with this frame's toe
+    (pelvis frame). The velocity stays as it was when the frames' times do not give one."""
+    step = time_s - motion[2, 0]
+    if vfinite(motion[0]) and 0.0 < step <= MAX_STEP_S:  # (NaN times fail both)
+        motion[1] = (toe - motion[0]) / step
+    motion[0], motion[2, 0] = toe, time_s
+
+
+@njit(cache=True)
+def recall(keys, offsets, state, point, can_fall_back, line, share, nt, width):
+    """The targets' offsets (nt, 3) where the NEIGHBOURS poses of one leg's memory (``keys``, ``offsets``,
+    ``state``: its own [0] and the other leg's [1]) whose key is nearest ``point`` had them, less each
+    target's ``share`` of its toe; a target kept as far from the toe as it was (share 1) turned as the foot's
+    ``line`` has turned since, when both are known. ``point``: the toe (3), or the toe and its velocity (6).
+    Also how far the poses' targets spread about that mean (nt: the weighted variance, m^2)."""
+    best_d, best_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
+    nearest(keys[0], state[0, 0], point, best_d, best_i)
+    source = 0
+    if can_fall_back and best_d[0] > FALLBACK_M and state[1, 0] >= NEIGHBOURS:
+        other_d, other_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
+        nearest(keys[1], state[1, 0], point, other_d, other_i)
+        if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
+            best_d, best_i, source = other_d, other_i, 1
+    mean, total, sq = np.zeros((nt, 3)), 0.0, np.zeros(nt)
+    turning = vnorm(line) > 0.0  # (no line now: nothing to turn)
+    turn = np.eye(3)
+    for n in range(NEIGHBOURS):
+        w = 1.0 / (best_d[n] + 1e-3)
+        pose, pose_toe = offsets[source, best_i[n]], keys[source, best_i[n], :3]
+        if turning:  # (the identity when the pose had no line)
+            turn = rotation_between(pose[width], line)
+        for t in range(nt):
+            offset = pose[t] - share[t] * pose_toe
+            offset = mv(turn, offset) if turning and share[t] == 1.0 else offset
+            mean[t] += w * offset
+            sq[t] += w * (offset ** 2).sum()
+        total += w
+    mean /= total
+    spread = np.empty(nt)  # (their weighted variance about it)
+    for t in range(nt):
+        spread[t] = max(sq[t] / total - (mean[t] ** 2).sum(), 1e-8)
+    return mean, spread
+
+
+@njit(cache=True)
 def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_kept, last_seen, estimate, out,
-               pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound):
+               pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound, toe_motion, time_s):
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
         pelvis_motion[TRACKING, 0] = 0.0
         return
     track_pelvis(origin, rot, pelvis_axes, pelvis_motion)
-    best_d, best_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
-    other_d, other_i = np.empty(NEIGHBOURS), np.empty(NEIGHBOURS, np.int64)
     flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
+    flip_key = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0])
+    pose_key = np.empty(6)
     width = legs.shape[1] - 3
     seen = np.zeros((width + 1, 3))  # the targets, then the foot's line
     for g in range(legs.shape[0]):
@@ -253,8 +323,11 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
         toe = lm[key].copy()
         if not vfinite(toe):
             estimate[g, 0, 0] = np.nan
+            toe_motion[g, 0, 0] = np.nan
             continue
         local_toe = mtv(rot, toe - origin)
+        toe_velocity(toe_motion[g], local_toe, time_s)
+        pose_key[:3], pose_key[3:] = local_toe, VELOCITY_S * toe_motion[g, 1]
         line, spacing = foot_line(tracking, foot[g], rot, foot_width[g])
         foot_sound[g] = foot_sound[g] + 1 if spacing == spacing else 0
         line = line if foot_sound[g] >= FOOT_SOUND_FRAMES else np.zeros(3)
@@ -271,37 +344,24 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
                 seen[width] = line
                 if spacing == spacing:
                     foot_width[g] = follow(foot_width[g], spacing, FOOT_WIDTH_RATE)
-                keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], local_toe, seen)
+                keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], pose_key, seen)
                 other = mirror[g]
                 if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
                     keep(toes[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
-                          local_toe * flip, seen * flip)
+                          pose_key * flip_key, seen * flip)
             continue
         if state[g, 0, 0] < NEIGHBOURS:
             continue
-        best_d[:] = np.inf
-        nearest(toes[g, 0], state[g, 0, 0], local_toe, best_d, best_i)
-        source = 0
-        if mirror[g] >= 0 and best_d[0] > FALLBACK_M and state[g, 1, 0] >= NEIGHBOURS:
-            other_d[:] = np.inf
-            nearest(toes[g, 1], state[g, 1, 0], local_toe, other_d, other_i)
-            if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
-                best_d[:], best_i[:], source = other_d, other_i, 1
-        # smoothed: the poses' targets less their share of their toe (this toe's is added after); a target
-        # kept as far from the toe as it was turned as the foot's line has turned since, when both are known
-        mean, total = np.zeros((nt, 3)), 0.0
-        turning = vnorm(line) > 0.0  # (no line now: nothing to turn)
-        turn = np.eye(3)
-        for n in range(NEIGHBOURS):
-            w = 1.0 / (best_d[n] + 1e-3)
-            pose, pose_toe = offsets[g, source, best_i[n]], toes[g, source, best_i[n]]
-            if turning:  # (the identity when the pose had no line)
-                turn = rotation_between(pose[width], line)
-            for t in range(nt):
-                offset = pose[t] - toe_share[g, t] * pose_toe
-                mean[t] += w * (mv(turn, offset) if turning and toe_share[g, t] == 1.0 else offset)
-            total += w
-        mean /= total
+        # the poses found by the toe's place, and by its place and velocity (VELOCITY_S): the ankle (turned with
+        # the foot) from the first, the knee from both, each weighted by how closely its poses agree
+        mean, place_spread = recall(toes[g], offsets[g], state[g], local_toe, mirror[g] >= 0, line, toe_share[g],
+                                    nt, width)
+        by_motion, motion_spread = recall(toes[g], offsets[g], state[g], pose_key, mirror[g] >= 0, line,
+                                          toe_share[g], nt, width)
+        for t in range(nt):
+            if toe_share[g, t] != 1.0:
+                w = place_spread[t] / (place_spread[t] + motion_spread[t])
+                mean[t] = w * by_motion[t] + (1.0 - w) * mean[t]
         if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps
             if np.isnan(last_seen[g, 0, 0]):
                 estimate[g, :nt] = mean

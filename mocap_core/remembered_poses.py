@@ -1,6 +1,7 @@
 """The store both pose memories keep (mocap_core.pose_memory in the hip stage, mocap_core.limb_memory in
 the IK stage): a ring of remembered poses, each a key point and what went with it, and a search for
-the poses whose key is nearest a point."""
+the poses whose key is nearest a point (a key: a point in 3-D, or longer: the pose memory adds the toe's
+velocity)."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,7 +14,7 @@ MIN_MOVE_M = 0.005  # a pose is kept when its key has moved this far from the la
 @njit(cache=True)
 def keep(keys, values, state, last_key, key, value):
     """Remember one pose (its key point and its values) if the key has moved since the last one kept.
-    One ring: keys (CAPACITY, 3), values (CAPACITY, m, 3), state [poses kept, where the next goes]."""
+    One ring: keys (CAPACITY, k), values (CAPACITY, m, 3), state [poses kept, where the next goes]."""
     if np.sqrt(((key - last_key) ** 2).sum()) < MIN_MOVE_M:
         return
     i = state[1]
@@ -29,9 +30,12 @@ def nearest(keys, count, point, best_d, best_i, offset=0):
     nearest first, len = how many are wanted; start them at inf), by insertion. A key's index is
     ``offset`` + its slot, so several rings can be searched into one list."""
     wanted = best_d.shape[0]
+    width = point.shape[0]
     for i in range(count):  # (written out: no temporary arrays in the loop)
-        dx, dy, dz = keys[i, 0] - point[0], keys[i, 1] - point[1], keys[i, 2] - point[2]
-        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        d = 0.0
+        for c in range(width):
+            d += (keys[i, c] - point[c]) ** 2
+        d = np.sqrt(d)
         if d < best_d[wanted - 1]:
             j = wanted - 1
             while j > 0 and best_d[j - 1] > d:

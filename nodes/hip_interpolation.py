@@ -63,7 +63,8 @@ class HipInterpolation(Node):
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
         fills_on = self.params.rebuild or self.params.pose_memory  # (both read the tracking markers)
-        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if fills_on else None)
+        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if fills_on else None,
+                                  msg.header.capture_time_s)
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:
