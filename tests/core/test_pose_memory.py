@@ -293,3 +293,24 @@ def test_walk1_knee_from_the_toes_place_and_velocity():
     knee, knee0 = (np.linalg.norm(out[start:, leg[0]] - lm[start:, leg[0]], axis=1)[seen].mean()
                    for out in (timed, untimed))
     assert knee < 0.85 * knee0, (knee, knee0)
+
+
+def test_times_that_stop_jump_back_or_are_missing_leave_the_recall_by_place():
+    """A replay that loops (its times jump back), a pause, and frames without a time: no velocity is taken
+    from them (the last one stays), nothing is NaN, and without any times the recall is by place alone."""
+    truth = _swinging_leg(800, 400)
+    hidden = truth.copy()
+    leg = [LANDMARK_INDEX[n] for n in LEG]
+    hidden[500:, leg] = np.nan
+    times = np.arange(800) / 100.0
+    times[300:] -= 2.5     # looped back
+    times[600:] += 7.0     # a pause of 4.5 s
+    times[650:700] = np.nan
+    odd, mask = PoseMemory(PRESENT).fill_landmarks(hidden, times_s=times)
+    assert mask[500:, leg].all() and np.isfinite(odd[500:, leg]).all()
+    err = np.linalg.norm(odd[500:, leg] - truth[500:, leg], axis=2)
+    step = np.linalg.norm(np.diff(truth[:, LANDMARK_INDEX["L_FAL"]], axis=0), axis=1).max()
+    assert err.max() < 3 * step, (err.max(), step)
+    untimed, _ = PoseMemory(PRESENT).fill_landmarks(hidden)
+    same, _ = PoseMemory(PRESENT).fill_landmarks(hidden, times_s=np.zeros(800))  # a source with no clock
+    np.testing.assert_array_equal(same, untimed)
