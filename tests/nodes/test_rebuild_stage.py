@@ -5,7 +5,9 @@ import pytest
 import zmq
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame, SkeletonFrame
-from mocap_core.profiles import LANDMARK_INDEX
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.pose_memory import PoseMemory
+from mocap_core.profiles import LANDMARK_INDEX, load_profile
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import INDEX, Status
 from nodes.hip_interpolation import HipInterpolation
@@ -122,6 +124,18 @@ def test_recalled_knee_and_ankle_are_flagged_interpolated():
             err = [np.linalg.norm(markers.got[f].positions[k] - take.positions[f, take.labels.index(label)])
                    for f in range(lost_from, frames)]
             assert max(err) < 0.1 and np.mean(err) < 0.05, (name, max(err), np.mean(err))
+        # the frames' capture times reach the memory (it finds the knee's poses by the toe's velocity too):
+        # the node's knee is the core's with those times, not the core's without them
+        pipe = SkeletonPipeline(load_profile("dance28"), take.labels, fill_gaps=False)
+        raw = take.positions[:frames].copy()
+        raw[lost_from:, hidden] = np.nan
+        memory = [PoseMemory(pipe.landmark_map.present(), pipe.landmark_map.tracking_of) for _ in range(2)]
+        timed, untimed = (m.fill_landmarks(pipe.landmarks(raw), None, pipe.landmark_map.tracking(raw), times)[0]
+                          for m, times in zip(memory, (np.arange(frames) / take.rate_hz, None)))
+        knee = LANDMARK_INDEX["L_FLE"]
+        node_knee = np.array([m.positions[knee] for m in markers.got[lost_from:]])
+        np.testing.assert_allclose(node_knee, timed[lost_from:, knee], atol=1e-4)
+        assert np.abs(timed[lost_from:, knee] - untimed[lost_from:, knee]).max() > 1e-3
     finally:
         for loop in loops:
             loop.ctx.close()
