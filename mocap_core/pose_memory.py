@@ -46,7 +46,8 @@ from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 from mocap_core.remembered_poses import CAPACITY, keep, nearest  # poses a leg; a pose kept per 5 mm of the toe
 
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
-                    "toe nearest where it is now had them (for marker sets with nothing else left on shank and foot)")
+                    "toe nearest where it is now had them (the knee's also by where the toe is going: the frames' "
+                    "times give its velocity), for marker sets with nothing else left on shank and foot")
 KEY = "FM2"                             # the toe: every profile has it
 # The knee's and the ankle's landmarks, and how much of the toe's offset from the remembered poses'
 # toes each takes along (0: where the poses had it in the pelvis's frame; 1: as far from the toe as
