@@ -43,7 +43,7 @@ from numba import njit
 
 from mocap_core.ik.kernels import follow, mm, mtv, mv, rotation_between, rotation_vector, turned_by, vfinite, vnorm
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
-from mocap_core.remembered_poses import CAPACITY, keep, nearest  # poses a leg; a pose kept per 5 mm of the toe
+from mocap_core.remembered_poses import CAPACITY, keep, nearest  # poses a leg; a pose kept per 5 mm of its key
 
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
                     "toe nearest where it is now had them (the knee's also by where the toe is going: the frames' "
@@ -58,7 +58,7 @@ TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 # is seen are left to it.
 HEEL = "FCC"
 NEIGHBOURS = 20     # remembered poses averaged (dance1: 10 gives the same error, 20 half the jitter)
-FALLBACK_M = 0.1    # no own pose with the toe this near: the other leg's, mirrored, if one is nearer
+FALLBACK_M = 0.1    # no own pose this near (the key's distance): the other leg's, mirrored, if one is nearer
 # Per frame: how far the estimate moves towards the remembered poses' mean. Their neighbours change as the toe
 # moves, and the mean jumps with them. Knee+ankle on the dance set, 0.5 -> 0.2: hidden 0.1 s in every 0.5 s
 # (dance2 left), 20.5 / 21.5 -> 17.9 / 17.8 mm mean, the ankle's largest added move at loss 1.39x -> 0.82x its
@@ -148,7 +148,7 @@ class PoseMemory:
         same = n == 2 and kinds[0] == kinds[1]
         self.mirror = np.array([1, 0] if same else [-1] * n, np.int64)
         # per leg, its own poses [0] and the other leg's, mirrored [1]:
-        self.toes = np.full((n, 2, CAPACITY, 6), np.inf)      # remembered toes and VELOCITY_S x their velocity
+        self.keys = np.full((n, 2, CAPACITY, 6), np.inf)      # the toes (pelvis frame), VELOCITY_S x their velocity
         # and the targets then, and last the foot's line (unit; zero: not known), in the pelvis frame
         self.offsets = np.zeros((n, 2, CAPACITY, width + 1, 3))
         self.state = np.zeros((n, 2, 2), np.int64)           # poses kept, where the next one goes
@@ -182,7 +182,7 @@ class PoseMemory:
         else:
             tracking, foot = np.asarray(tracking, np.float64), self.foot
         if len(self.legs):
-            fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.toes, self.offsets, self.state,
+            fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.keys, self.offsets, self.state,
                        self.last_kept, self.last_seen, self.estimate, out, self.pelvis_axes, self.pelvis_motion,
                        tracking, foot, self.foot_width, self.foot_sound, self.toe_motion, float(time_s))
         return out
@@ -275,7 +275,8 @@ def recall(keys, offsets, state, point, can_fall_back, line, share, nt, width):
     """The targets' offsets (nt, 3) where the NEIGHBOURS poses of one leg's memory (``keys``, ``offsets``,
     ``state``: its own [0] and the other leg's [1]) whose key is nearest ``point`` had them, less each
     target's ``share`` of its toe; a target kept as far from the toe as it was (share 1) turned as the foot's
-    ``line`` has turned since, when both are known. ``point``: the toe (3), or the toe and its velocity (6).
+    ``line`` has turned since, when both are known. ``point``: the toe (3: the keys' first three numbers are
+    compared), or the toe and its velocity (6).
     Also how far the poses' targets spread about that mean (nt: the weighted variance, m^2)."""
     best_d, best_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
     nearest(keys[0], state[0, 0], point, best_d, best_i)
@@ -307,7 +308,7 @@ def recall(keys, offsets, state, point, can_fall_back, line, share, nt, width):
 
 
 @njit(cache=True)
-def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_kept, last_seen, estimate, out,
+def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_kept, last_seen, estimate, out,
                pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound, toe_motion, time_s):
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
@@ -345,19 +346,19 @@ def fill_frame(lm, filled, legs, mirror, toe_share, toes, offsets, state, last_k
                 seen[width] = line
                 if spacing == spacing:
                     foot_width[g] = follow(foot_width[g], spacing, FOOT_WIDTH_RATE)
-                keep(toes[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], pose_key, seen)
+                keep(keys[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], pose_key, seen)
                 other = mirror[g]
                 if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
-                    keep(toes[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
+                    keep(keys[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
                           pose_key * flip_key, seen * flip)
             continue
         if state[g, 0, 0] < NEIGHBOURS:
             continue
         # the poses found by the toe's place, and by its place and velocity (VELOCITY_S): the ankle (turned with
         # the foot) from the first, the knee from both, each weighted by how closely its poses agree
-        mean, place_spread = recall(toes[g], offsets[g], state[g], local_toe, mirror[g] >= 0, line, toe_share[g],
+        mean, place_spread = recall(keys[g], offsets[g], state[g], local_toe, mirror[g] >= 0, line, toe_share[g],
                                     nt, width)
-        by_motion, motion_spread = recall(toes[g], offsets[g], state[g], pose_key, mirror[g] >= 0, line,
+        by_motion, motion_spread = recall(keys[g], offsets[g], state[g], pose_key, mirror[g] >= 0, line,
                                           toe_share[g], nt, width)
         for t in range(nt):
             if toe_share[g, t] != 1.0:

@@ -28,7 +28,8 @@ def keep(keys, values, state, last_key, key, value):
 def nearest(keys, count, point, best_d, best_i, offset=0):
     """Merge the first ``count`` keys of one ring into the nearest found so far (``best_d``, ``best_i``,
     nearest first, len = how many are wanted; start them at inf), by insertion. A key's index is
-    ``offset`` + its slot, so several rings can be searched into one list."""
+    ``offset`` + its slot, so several rings can be searched into one list. A point shorter than the keys is
+    compared with their first numbers (the pose memory finds poses by the toe's place alone that way)."""
     wanted = best_d.shape[0]
     width = point.shape[0]
     for i in range(count):  # (written out: no temporary arrays in the loop)
