@@ -22,7 +22,7 @@ come apart from their learned spacing: then a marker is wrong, and the offsets a
 
 Where the frames' times are known, the knee's poses are also looked for by where the toe is going: a walking
 toe passes each place twice a step, in the swing and in the stance, with the knee bent differently
-(VELOCITY_S). walk1's right knee 56 -> 42 mm.
+(VELOCITY_S). walk1's knees 43 / 56 -> 31 / 43 mm.
 
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 pose of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
@@ -106,13 +106,14 @@ FOOT_SOUND_FRAMES = 20
 # standing on one foot) its poses spread and the place's answer stays. The ankle is found by the place alone:
 # with the velocity the walks' ankles got worse (walk2 right 24 -> 31 mm), the foot's line turns it instead.
 # Knee+ankle hidden (joint level, studio options; the walks from 2 s to the end, the dances 5-15 s), the knee's
-# mean: walk1 left 42.8 -> 30.5 mm, right 56.1 -> 42.1, walk2 42.0 -> 36.9 and 45.5 -> 39.7; dance1 25.7 -> 23.2
-# (right) and 29.8 -> 31.2 (left), dance2 45.8 -> 44.5 and 34.3 -> 34.9; the ankles within 0.7 mm. The sixteen
-# means 602 -> 564 mm. Velocity alone for the knee: 570 (dance2 right's knee 34 -> 38); VELOCITY_S 0.08 / 0.25:
-# 574 / 577 (that alone); the velocity smoothed over frames (gain 0.5): 567 with the combination. With the
-# velocity, the knee's largest added move at return on short gaps (dance1, 0.1 s in every 0.5 s) is 1.44x its
-# normal step (1.36x before; 1.52x with the velocity alone).
-VELOCITY_S = 0.15
+# mean: walk1 left 42.8 -> 30.8 mm, right 56.1 -> 42.8, walk2 42.0 -> 39.6 and 45.5 -> 37.8, dance2 45.8 -> 42.3
+# and 34.3 -> 33.6, dance1 right 25.7 -> 23.2, left 29.8 -> 29.9; the ankles within 0.4 mm. The sixteen means
+# 602 -> 560 mm. VELOCITY_S 0.1 / 0.15 / 0.25 / 0.6 / 1.0: 570 / 564 / 561 / 561 / 562 (0.15 took dance1 left's
+# knee to 31.2 and dance2 right's to 34.9). The velocity search alone for the knee: 570 at 0.15 s (dance2 right's
+# knee 34 -> 38); smoothed over frames (gain 0.5): 567. The knee's largest added move at return on short gaps
+# (dance1, 0.1 s in every 0.5 s): 1.38x its normal step (1.36x before; 1.44x at 0.15 s, 1.52x with the velocity
+# search alone).
+VELOCITY_S = 0.4
 MAX_STEP_S = 0.1  # frames further apart than this give no velocity (the last one is kept)
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
 
