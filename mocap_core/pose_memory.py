@@ -318,7 +318,7 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
     track_pelvis(origin, rot, pelvis_axes, pelvis_motion)
     flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
     flip_key = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0])
-    pose_key = np.empty(6)
+    pose_key, no_line = np.empty(6), np.zeros(3)
     width = legs.shape[1] - 3
     seen = np.zeros((width + 1, 3))  # the targets, then the foot's line
     for g in range(legs.shape[0]):
@@ -356,10 +356,11 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
         if state[g, 0, 0] < NEIGHBOURS:
             continue
         # the poses found by the toe's place, and by its place and velocity (VELOCITY_S): the ankle (turned with
-        # the foot) from the first, the knee from both, each weighted by how closely its poses agree
+        # the foot) from the first, the knee from both, each weighted by how closely its poses agree (the second
+        # search's ankle is not used, so it is not turned: no line)
         mean, place_spread = recall(keys[g], offsets[g], state[g], local_toe, mirror[g] >= 0, line, toe_share[g],
                                     nt, width)
-        by_motion, motion_spread = recall(keys[g], offsets[g], state[g], pose_key, mirror[g] >= 0, line,
+        by_motion, motion_spread = recall(keys[g], offsets[g], state[g], pose_key, mirror[g] >= 0, no_line,
                                           toe_share[g], nt, width)
         for t in range(nt):
             if toe_share[g, t] != 1.0:
