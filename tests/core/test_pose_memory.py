@@ -134,9 +134,10 @@ def test_dance1_knee_and_ankle_from_the_pose_memory():
 
 def test_walk1_knee_and_ankle_from_a_memory_of_two_seconds():
     """A walk in the same 28-marker set, knee and ankle hidden from 2 s to the end (3.85 s): 135 / 61 mm
-    with swivel and segment carry alone."""
+    with swivel and segment carry alone. With the toe's velocity and the lighter smoothing (stop 33) this leg
+    meets issue 9's 30 mm (28 / 23 mm; 31 / 26 with a fifth of the way a frame, which lagged the knee)."""
     (knee, ankle), (knee0, ankle0) = (_dance_gap("walk1", "l", m, 2.0, None) for m in (True, False))
-    assert knee < 0.07 and ankle < 0.05, (knee, ankle)
+    assert knee < 0.03 and ankle < 0.03, (knee, ankle)
     assert knee < 0.5 * knee0 and ankle < 0.7 * ankle0, (knee, ankle, knee0, ankle0)
 
 
