@@ -64,11 +64,12 @@ FALLBACK_M = 0.1    # no own pose this near (the key's distance): the other leg'
 # (dance2 left), 20.5 / 21.5 -> 17.9 / 17.8 mm mean, the ankle's largest added move at loss 1.39x -> 0.82x its
 # normal step; hidden 5-15 s, dance1 27.7 / 66.6 -> 28.8 / 66.8, dance2 48.9 / 54.9 -> 47.1 / 53.9, walk1
 # 45.8 / 33.7 -> 43.9 / 33.5 (both before the blend's course weight, analytic_fill.course_weight). 0.1 took
-# dance1's knee to 30.2 and walk1's ankle to 40.0. Since the velocity search (stop 33), 0.2 -> 0.3: the recall
-# follows a walking knee closely enough that the smoothing's lag (4 frames at 0.2) costs more than its jitter;
-# the sixteen knee and ankle means of the long gaps 560 -> 532 mm (walk1 right's knee 42.8 -> 37.9), and the
-# knee's largest added move at return on short gaps 1.38x -> 1.43x (dance1), 1.12x -> 1.30x (dance2). 0.35 / 0.4 /
-# 0.5: 526 / 523 / 522, with 1.46x / 1.51x / 1.62x at return; a tracked step (alpha-beta) added nothing.
+# dance1's knee to 30.2 and walk1's ankle to 40.0. Stop 33, 0.2 -> 0.3: with stop 32's velocity search the
+# recall follows a walking knee closely enough that the smoothing's lag (4 frames at 0.2) costs more than its
+# jitter; the sixteen knee and ankle means of the long gaps 560 -> 532 mm (walk1 right's knee 42.8 -> 37.9), and
+# the knee's largest added move at return on short gaps 1.38x -> 1.43x (dance1), 1.12x -> 1.30x (dance2). 0.35 /
+# 0.4 / 0.5: 526 / 523 / 522, with 1.46x / 1.51x / 1.61x at return (dance1); a tracked step (alpha-beta) added
+# nothing, a step predicted from the poses' own motion 516-526 with the return at 1.45-1.48x (docs/gap_filling.md).
 SMOOTHING = 0.3
 # The pelvis frame the poses are kept in and recalled from comes from three skin markers (the ASIS and the
 # sacrum), and its turn from one frame to the next changes by 0.3-0.4 deg (median) and 1.3-2.7 deg (95th
