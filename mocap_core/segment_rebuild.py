@@ -30,6 +30,7 @@ carry gives 4 mm) and the hand with the forearm (a wrist flexes).
 """
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
@@ -53,7 +54,8 @@ MIN_SHAFT_PARTNERS = 2
 MIN_SPREAD_M = 0.005
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
-                "tracking markers), or of 2 along the bone (a tracking marker and a landmark), or of markers on "
+                "tracking markers), or of 2 along the bone (a tracking marker and a landmark; a forearm's rolled by "
+                "the upper arm's), or of markers on "
                 "one line rolled by the bone above's; elbow, knee and ankle held to the upper arm's, thigh's and "
                 "shank's markers; then a lost knee and ankle from the hip and one shank marker, or the ankle "
                 "(the leg hinge), which also turns a knee rebuilt from 2 to keep its distances from the hip")
@@ -108,16 +110,27 @@ TRACKING_PRIOR = 0.3
 MAX_ROLL = np.radians(90.0)
 ROLL_STEP = np.radians(5.0)
 ROLL_PRICE = 0.001
+# A forearm rolls about its shaft (pronation: up to 150 deg), a shank hardly does. So where two partners along
+# the forearm are left (its marker and the outer wrist marker), the roll kept from the reference frame may be
+# long gone: the member is rolled by the upper arm's markers instead, and of the two rolls one distance leaves
+# (mirror images) the search keeps to the one nearest the member's point in the frame before. Vicon take, right
+# elbow hidden from 1 s, its inner wrist marker lost (a real gap) in a 4-5 m/s swing at 8.5-8.65 s: 13.8 / 138
+# -> 11.7 / 53 mm (the epicondyle 233 mm off at worst before). Its left elbow, whose wrist markers slide,
+# 102 / 205 -> 118 / 196: there the frame before was a fit with a slid marker. Rolled so without the frame
+# before: right 13.8 / 120 (the wrong mirror from 8.55 s). The shank rolled so too: the Vicon legs' knees
+# 22 / 28 -> 28 / 50 mm. A lower price for this roll (0.0001): the right elbow 12.1 / 53, the left's max 258.
+ROLLS_ABOUT_SHAFT = ("forearm",)
 N_LANDMARKS = len(LANDMARKS)
 
 
 def segment_table(tracking_of: Sequence[str] = ()
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Point indices per segment (segments x width; the rebuilt members first, then the partners and the
     bone's tracking markers, then the points used for distances only; -1 padding), and per segment how
-    many are rebuilt, how many move rigidly with it, how many of the first are refined by distances, and
-    from which point on the tracking markers hold those distances firmly (0: the bone's own too). Points
-    are the landmarks, then the tracking markers (``tracking_of``: the segment of each, e.g. "L_forearm")."""
+    many are rebuilt, how many move rigidly with it, how many of the first are refined by distances, from
+    which point on the tracking markers hold those distances firmly (0: the bone's own too), and whether it
+    rolls about its shaft (ROLLS_ABOUT_SHAFT). Points are the landmarks, then the tracking markers
+    (``tracking_of``: the segment of each, e.g. "L_forearm")."""
     def tracks(name):
         return [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == name]
 
@@ -130,11 +143,11 @@ def segment_table(tracking_of: Sequence[str] = ()
             assert rebuilt[:len(refined)] == refined  # the refined ones lead the rebuilt ones
             rows.append(rigid + distance_only)
             counts.append((len(rebuilt), len(rigid), len(refined) if distance_only else 0,
-                           0 if own_too else len(rigid)))
+                           0 if own_too else len(rigid), bone in ROLLS_ABOUT_SHAFT))
     width = max(map(len, rows))
     table = np.array([r + [-1] * (width - len(r)) for r in rows], np.int64)
-    rebuilt_count, rigid_count, refined_count, held_from = (np.array(c, np.int64) for c in zip(*counts))
-    return table, rebuilt_count, rigid_count, refined_count, held_from
+    rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls = (np.array(c, np.int64) for c in zip(*counts))
+    return table, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls
 
 
 class SegmentRebuilder:
@@ -143,7 +156,7 @@ class SegmentRebuilder:
 
     def __init__(self, tracking_of: Sequence[str] = ()):
         (self.segments, self.rebuilt_count, self.rigid_count, self.refined_count,
-         self.held_from) = segment_table(tracking_of)
+         self.held_from, self.shaft_rolls) = segment_table(tracking_of)
         self.n_tracking = len(tracking_of)
         width = self.segments.shape[1]
         # per segment and member: where the segment's markers were the last time that member was
@@ -151,6 +164,8 @@ class SegmentRebuilder:
         self.reference = np.full((len(self.segments), width, width, 3), np.nan)
         # per segment, refined member and point: their learned distance (NaN: never measured together)
         self.distance = np.full((len(self.segments), width, width), np.nan)
+        # per segment and member: its point in the frame before, seen or rebuilt (NaN: neither)
+        self.last = np.full((len(self.segments), width, 3), np.nan)
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost, and of the tracking markers
@@ -163,7 +178,7 @@ class SegmentRebuilder:
             points = np.concatenate([landmarks, tracking])
         rebuilt = np.zeros(len(points), np.bool_)
         rebuild_frame(points, self.segments, self.rebuilt_count, self.rigid_count, self.refined_count, self.held_from,
-                      self.reference, self.distance, rebuilt)
+                      self.shaft_rolls, self.reference, self.distance, self.last, rebuilt)
         if points is not landmarks:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
@@ -180,10 +195,12 @@ class SegmentRebuilder:
 
 
 @njit(cache=True)
-def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, reference, distance, rebuilt):
+def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, reference, distance,
+                  last, rebuilt):
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
     point, above = np.empty((1, 3)), np.empty((segments.shape[1], 3))
+    previous = np.empty((segments.shape[1], 3))  # each member in the frame before
     for s in range(segments.shape[0]):
         seg, rigid = segments[s], rigid_count[s]
         width, count = 0, 0
@@ -194,6 +211,9 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             seen[k] = vfinite(lm[seg[k]])
             if seen[k] and k < rigid:
                 count += 1
+            if k < rebuilt_count[s]:
+                previous[k] = last[s, k]
+                last[s, k] = lm[seg[k]]  # (NaN when lost; a rebuilt one is written below)
         _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
         # Each seen member's reference: the segment as it is now, unless that has fewer partners than
         # the one kept, which then stays. (The Vicon take's heel is lost in the frame before its ankle
@@ -219,11 +239,15 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                     n += 1
                     if seg[m] >= N_LANDMARKS:
                         shaft += 1
-            rolled, i, j = False, 0, 1  # (rolled: carried by partners i and j's line, then about it by the bone above)
+            # (rolled: carried by partners i and j's line, then about it by the bone above; forearm_roll: from the
+            # member's side of that line in the frame before, see ROLLS_ABOUT_SHAFT)
+            rolled, forearm_roll, i, j = False, False, 0, 1
             if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
                 rot, t = rigid_fit_first(before, after, n)
             elif n == MIN_SHAFT_PARTNERS and shaft == 1:
                 rot, t = _line_carry(before[0], before[1], after[0], after[1])
+                rolled = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k])
+                forearm_roll = rolled
             elif n >= 2 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k]):
                 i, j = _farthest(before, n)
                 rot, t = _line_carry(before[i], before[j], after[i], after[j])
@@ -231,12 +255,15 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             else:
                 continue
             p = mv(rot, reference[s, k, k]) + t
+            if forearm_roll and vfinite(previous[k]):
+                p = _turned_toward(p, after[i], after[j], previous[k])
             if rolled:
                 p = _roll_by_above(p, after[i], after[j], lm, seg, rigid, width, seen, distance[s, k], point, above)
             elif k < refined_count[s]:
                 p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, -1)
                 p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR, held_from[s])
             lm[seg[k]] = p
+            last[s, k] = p
             rebuilt[seg[k]] = True
 
 
@@ -245,6 +272,15 @@ def _line_carry(before0, before1, after0, after1):
     """The least rotation that turns the line between two points, and the shift that then puts their midpoint."""
     rot = rotation_between(before1 - before0, after1 - after0)
     return rot, 0.5 * (after0 + after1) - mv(rot, 0.5 * (before0 + before1))
+
+
+@njit(cache=True)
+def _turned_toward(p, pivot, toward, target):
+    """``p`` turned about the line from ``pivot`` toward ``toward`` to the side of it where ``target`` is."""
+    line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
+    u, w = p - pivot, target - pivot
+    u, w = u - (line @ u) * line, w - (line @ w) * line
+    return pivot + mv(axis_angle(line, math.atan2(line @ np.cross(u, w), u @ w)), p - pivot)
 
 
 @njit(cache=True)
