@@ -54,11 +54,11 @@ MIN_SHAFT_PARTNERS = 2
 MIN_SPREAD_M = 0.005
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
-                "tracking markers), or of 2 along the bone (a tracking marker and a landmark; a forearm's rolled by "
-                "the upper arm's), or of markers on "
-                "one line rolled by the bone above's; elbow, knee and ankle held to the upper arm's, thigh's and "
-                "shank's markers; then a lost knee and ankle from the hip and one shank marker, or the ankle "
-                "(the leg hinge), which also turns a knee rebuilt from 2 to keep its distances from the hip")
+                "tracking markers), or of 2 along the bone (a tracking marker and a landmark; a forearm's rolled "
+                "by the upper arm's), or of markers on one line rolled by the bone above's; elbow, knee and ankle "
+                "held to the upper arm's, thigh's and shank's markers; then a lost knee and ankle from the hip and "
+                "one shank marker, or the ankle (the leg hinge), which also turns a knee rebuilt from 2 to keep its "
+                "distances from the hip")
 # Rigid bodies of landmarks: (bone, rebuilt when lost, partners only), in the order they are rebuilt:
 # the shank's partners include the malleoli the foot may have rebuilt just before. The profile's
 # tracking markers of a bone (wands, clusters) join it as partners. The styloids only help: rebuilt
