@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import mm, mtv, mv, rotation_between, vcross, vdot, vnorm
+from mocap_core.ik.kernels import axis_angle, mm, mtv, mv, rotation_between, vcross, vdot, vnorm
 
 MISSING, LOCATED, ESTIMATED, HELD = 0, 1, 2, 3   # mocap_core.skeleton.Status
 MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
@@ -85,6 +85,14 @@ MAX_APART_M = 0.5
 # BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
 # where the markers came back and how many; frames located in a row.
 ACC_SUM, ACC_N, MISS_SQ, MISS_N, LOCATED_RUN = range(5)
+# How far a lost joint's frame turns with the plane of its two bones (shape_turn): not at all below a bend of
+# STRAIGHT_SIN (about 3 degrees), wholly from STRAIGHT_SIN + PLANE_RANGE (17 degrees). Nearly straight, the plane is
+# noise: a lost joint out of its neighbours' reach (put on their line) turned its frame about an arbitrary axis
+# (the Vicon take's left shoulder, its acromion lost, turned 130-175 degrees a frame, and the held wrist and hand
+# it carries moved 83 mm a frame), and a lone wrist bent 4-6 degrees turned 45 degrees a frame (135 degrees in 4
+# frames where its markers, seen on either side, turned 15).
+STRAIGHT_SIN = 0.05
+PLANE_RANGE = 0.25
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone
 
 
@@ -164,18 +172,37 @@ def _frame_along(y, like):
 
 @njit(cache=True)
 def _plane_frame(first, second):
-    """Orthonormal frame (columns) with x along ``second`` and y in the plane of the two bones."""
+    """Orthonormal frame (columns) with x along ``second`` and y in the plane of the two bones (not straight)."""
     x = second / vnorm(second)
     y = first - vdot(first, x) * x
-    ny = vnorm(y)
-    if not ny > 1e-9:  # a straight limb: any perpendicular will do
-        helper = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        y = vcross(x, helper)
-        ny = vnorm(y)
-    y = y / ny
+    y = y / vnorm(y)
     out = np.empty((3, 3))
     out[:, 0], out[:, 1], out[:, 2] = x, y, vcross(x, y)
     return out
+
+
+@njit(cache=True)
+def _bend_sin(first, second):
+    """The sine of the angle between two bones (0: a straight limb, or a bone of no length)."""
+    size = vnorm(first) * vnorm(second)
+    return vnorm(vcross(first, second)) / size if size > 1e-12 else 0.0
+
+
+@njit(cache=True)
+def shape_turn(first_before, second_before, first, second):
+    """The rotation that carries two bones' last shape onto their new one: the least rotation of the second
+    bone, then the roll about it that turns their plane with them, taken whole once both shapes bend by
+    STRAIGHT_SIN + PLANE_RANGE and not at all below STRAIGHT_SIN (a nearly straight shape's plane is noise)."""
+    least = rotation_between(second_before, second)
+    bend = min(_bend_sin(first_before, second_before), _bend_sin(first, second))
+    share = min(1.0, max(0.0, (bend - STRAIGHT_SIN) / PLANE_RANGE))
+    if share == 0.0:
+        return least
+    axis = second / vnorm(second)
+    rolled = mv(least, _plane_frame(first_before, second_before)[:, 1].copy())
+    plane_y = _plane_frame(first, second)[:, 1].copy()
+    roll = math.atan2(vdot(axis, vcross(rolled, plane_y)), vdot(rolled, plane_y))
+    return mm(axis_angle(axis, share * roll), least)
 
 
 @njit(cache=True)
@@ -280,7 +307,7 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
     joint = centre + radius * u
     positions[idx[k]] = joint
     # the rest of the run: its last shape, turned with the plane of (a, k, b)
-    turn = mm(_plane_frame(joint - root, target - joint), _plane_frame(pk - pa, pb - pk).T.copy())
+    turn = shape_turn(pk - pa, pb - pk, joint - root, target - joint)
     for j in range(k + 1, b):
         positions[idx[j]] = joint + mv(turn, prev_pos[j] - pk)
     for j in range(k, b):
@@ -434,10 +461,13 @@ class BlendState:
 
 
 @njit(cache=True)
-def _take_step(velocity, step, limit):
-    """A source's step becomes its velocity unless it is faster than any joint moves (a jump, or two
-    fills of one kind that are not one source), in place."""
-    if vnorm(step) <= limit:
+def _take_step(velocity, step, last_step, limit):
+    """A source's step becomes its velocity unless it is faster than any joint moves and as far off its own last
+    step (a jump, or two fills of one kind that are not one source), in place. (Faster alone is not enough: a
+    kicking toe filled at 105 mm a frame, 12.6 m/s, kept a velocity of 83 mm a frame from before; its curving
+    course then left that by over the jump's threshold, every next frame was met as a jump, and the output stood
+    still for 4 frames, 400 mm behind: the Vicon take's right toe at frame 490.)"""
+    if vnorm(step) <= limit or vnorm(step - last_step) <= limit:
         velocity[:] = step
 
 
@@ -501,12 +531,12 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         offset_vel[k] = 0.0  # a new offset, eased from rest
         since = seen_age[k, kind]  # frames since this kind of source was last seen
         if found_or_lost and since <= FLICKER_FRAMES:
-            _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, SOURCE_JUMP_M_S * dt)
+            _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
         elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
             raw_vel[k] = 0.0  # each taken into the offset (stop 28: the Vicon take's kicking knee, 0.46 m in 5 frames)
     else:
         if was != MISSING and not handed and not spike:  # (a hand-over's jump is not the source's step)
-            _take_step(raw_vel[k], raw - last_raw[k], SOURCE_JUMP_M_S * dt)
+            _take_step(raw_vel[k], raw - last_raw[k], last_raw[k] - prev_raw[k], SOURCE_JUMP_M_S * dt)
         limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
         before = offset[k].copy()
         spring = offset_vel[k] + omega * before

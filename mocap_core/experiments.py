@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -137,7 +137,7 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             fill_options: dict | None = None, hips_lost: str = "hold", rebuild: bool = False,
             tracking: np.ndarray | None = None, tracking_of: tuple[str, ...] = (),
             pose_memory: bool = False, short_gaps: tuple[int, int] | None = None,
-            rate_hz: float | None = None) -> GapRun:
+            rate_hz: float | None = None, partial: tuple[np.ndarray, np.ndarray] | None = None) -> GapRun:
     """Hide ``joints`` (and landmarks named in it) in frames [start, stop) and fill them; compare
     with the complete take. ``short_gaps`` (length, every), frames: hide them instead in gaps of
     ``length`` frames, one starting every ``every`` frames from ``start`` on (a studio's occlusions are
@@ -145,7 +145,10 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     paces the fill's blends. ``rebuild``: lost limb landmarks rebuilt from their segment's others and
     from the profile's tracking markers (``tracking``, frames x markers x 3; ``tracking_of``: the
     segment of each, LandmarkMap.tracking_of), which stay seen. ``pose_memory``: lost knee and ankle
-    landmarks from the take's earlier poses (mocap_core.pose_memory), after the rebuild."""
+    landmarks from the take's earlier poses (mocap_core.pose_memory), after the rebuild. ``partial``: the
+    take's landmarks kept from some of their markers and their mask (PartialMeans.fill_landmarks of the whole
+    take), which fill those still lost after the rebuild and the pose memory, as in the hip node; not the
+    hidden ones."""
     from mocap_core.landmark_fills import LandmarkFills
     from mocap_core.localization import Localizer
 
@@ -157,16 +160,22 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     for a, b in windows:
         gap[a:b] = True
     lm = landmarks.copy()
+    hidden_lm = np.zeros(lm.shape[:2], bool)
     if mode == "markers":
         for j in hidden:
             for name in landmarks_of(j):
-                lm[gap, LANDMARK_INDEX[name]] = np.nan
+                hidden_lm[gap, LANDMARK_INDEX[name]] = True
+        lm[hidden_lm] = np.nan
     lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
     # the profile's landmarks: those the complete take has somewhere
     present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
     frame_s = 1.0 / rate_hz if rate_hz else float("nan")
     lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present).fill_landmarks(
         lm, tracking, np.arange(len(lm)) * frame_s)
+    if partial is not None:
+        kept = partial[1] & ~hidden_lm & np.isnan(lm).any(axis=2)
+        lm[kept] = partial[0][kept]
+        rebuilt = kept if rebuilt is None else rebuilt | kept
     loc = Localizer(profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if mode == "joint":
@@ -234,6 +243,10 @@ class RealGapMoves:
     paced: np.ndarray       # move / max(normal, the joint's own pace there) at each change of status
     filled: np.ndarray      # move / normal on each move into or out of a filled frame
     worst: list[tuple[float, str, int]]  # (move / normal, joint, frame) of the largest moves at a change
+    # and the bone frames (what a rig streams), where given: on each move into or out of a filled frame, the
+    # frame's turn in degrees and that turn over the joint's normal one (95th percentile between located frames)
+    turned_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    turned: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def row(self) -> dict:
         def over(a, x):
@@ -244,7 +257,10 @@ class RealGapMoves:
                 "paced_max": float(self.paced.max()) if len(self.paced) else float("nan"),
                 "filled_moves": len(self.filled), "filled_over_1_5": over(self.filled, 1.5),
                 "filled_over_3": over(self.filled, 3.0),
-                "filled_max": float(self.filled.max()) if len(self.filled) else float("nan")}
+                "filled_max": float(self.filled.max()) if len(self.filled) else float("nan"),
+                "turns": len(self.turned), "turns_over_1_5": over(self.turned, 1.5),
+                "turns_over_3": over(self.turned, 3.0), "turns_over_30_deg": over(self.turned_deg, 30.0),
+                "turns_max_deg": float(self.turned_deg.max()) if len(self.turned_deg) else float("nan")}
 
 
 @dataclass
@@ -292,10 +308,19 @@ def _own_pace(step: np.ndarray, both: np.ndarray, change: int) -> float:
     return max(pace, step[change + 1 + after[0]]) if len(after) else pace
 
 
-def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int = 100) -> RealGapMoves:
-    """``positions`` (F, joints, 3), ``status`` (F, joints) of a solved take. Joints located in fewer than
-    ``min_located`` frames have no normal motion to compare with and are left out."""
-    changes, paced, filled, worst = [], [], [], []
+def _turns_deg(frames: np.ndarray) -> np.ndarray:
+    """Per-frame turn of one joint's bone frames (F, 3, 3), degrees: F - 1 angles (NaN where a frame is unknown)."""
+    relative = np.einsum("fab,fac->fbc", frames[:-1], frames[1:])
+    cos = (np.trace(relative, axis1=1, axis2=2) - 1) / 2
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int = 100,
+                   frames: np.ndarray | None = None) -> RealGapMoves:
+    """``positions`` (F, joints, 3), ``status`` (F, joints) of a solved take, and its bone ``frames`` (F, joints, 3,
+    3) if the turns are wanted too. Joints located in fewer than ``min_located`` frames have no normal motion to
+    compare with and are left out."""
+    changes, paced, filled, worst, turned_deg, turned = [], [], [], [], [], []
     filled_status = (int(Status.ESTIMATED), int(Status.HELD))
     for j, joint in enumerate(JOINTS):
         step = _steps(positions[:, j])
@@ -313,7 +338,16 @@ def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int =
         paced.append(np.array([step[c] / max(normal, _own_pace(step, both, c)) for c in np.flatnonzero(change)]))
         filled.append(step[near_fill & seen[1:] & seen[:-1]] / normal)
         worst += [(float(step[f] / normal), joint, int(f + 1)) for f in np.flatnonzero(change)]
+        if frames is not None:
+            turn = _turns_deg(frames[:, j])
+            normal_turn = np.nanpercentile(turn[both], 95) if np.isfinite(turn[both]).any() else np.nan
+            near = near_fill & np.isfinite(turn)
+            if normal_turn > 0:
+                turned_deg.append(turn[near])
+                turned.append(turn[near] / normal_turn)
     worst.sort(reverse=True)
     return RealGapMoves(np.concatenate(changes) if changes else np.zeros(0),
                         np.concatenate(paced) if paced else np.zeros(0),
-                        np.concatenate(filled) if filled else np.zeros(0), worst[:5])
+                        np.concatenate(filled) if filled else np.zeros(0), worst[:5],
+                        np.concatenate(turned_deg) if turned_deg else np.zeros(0),
+                        np.concatenate(turned) if turned else np.zeros(0))

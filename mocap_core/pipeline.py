@@ -19,6 +19,7 @@ from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.localization import Localizer
+from mocap_core.partial_means import PartialMeans
 from mocap_core.profiles import Profile
 
 
@@ -48,6 +49,7 @@ class SkeletonPipeline:
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         on = beyond and fill_gaps  # the landmark fills are gap fills
+        self.partial = PartialMeans(self.landmark_map) if on else None
         self.fills = LandmarkFills(on, on, self.landmark_map.tracking_of, self.landmark_map.present())
         self.localizer = Localizer(profile.body)
         options = fill_options if fill_options is not None else BEYOND_THESIS if beyond else {}
@@ -59,12 +61,17 @@ class SkeletonPipeline:
         lm, _ = self.hips.fill_landmarks(lm)
         return lm
 
-    def solve_landmarks(self, landmarks: np.ndarray, start: int = 0, tracking: np.ndarray | None = None
-                        ) -> SolvedChunk:
+    def solve_landmarks(self, landmarks: np.ndarray, start: int = 0, tracking: np.ndarray | None = None,
+                        markers: np.ndarray | None = None) -> SolvedChunk:
         """``tracking``: the profile's tracking markers of the same frames (landmark_map.tracking), which
-        help rebuild lost limb landmarks (the rebuild is a gap fill: on with ``beyond`` and ``fill_gaps``)."""
+        help rebuild lost limb landmarks (the rebuild is a gap fill: on with ``beyond`` and ``fill_gaps``);
+        ``markers``: the frames' markers, from which a landmark that is the mean of several, still lost, is kept
+        while some of them are seen (mocap_core.partial_means; with the rebuild)."""
         times = (start + np.arange(len(landmarks))) * self.frame_s
         landmarks, rebuilt = self.fills.fill_landmarks(landmarks, tracking, times)
+        if self.partial is not None and markers is not None:  # (what the fills before could not)
+            landmarks, kept = self.partial.fill_landmarks(markers, landmarks)
+            rebuilt = kept if rebuilt is None else rebuilt | kept
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:
@@ -75,4 +82,4 @@ class SkeletonPipeline:
     def run(self, markers: np.ndarray, chunk: int = 250) -> Iterator[SolvedChunk]:
         for start in range(0, len(markers), chunk):
             part = markers[start:start + chunk]
-            yield self.solve_landmarks(self.landmarks(part), start, self.landmark_map.tracking(part))
+            yield self.solve_landmarks(self.landmarks(part), start, self.landmark_map.tracking(part), part)

@@ -80,6 +80,26 @@ def test_real_gap_moves_known_answer():
     assert abs(moves.paced[0] - np.hypot(1, 10)) < 1e-6  # the joint moved 1 mm a frame on either side
 
 
+def test_real_gap_moves_turns_of_the_bone_frames_known_answer():
+    """A joint's frame turns 1 degree a frame while located, then, estimated from frame 200 on, 40 degrees in one
+    frame and 1 a frame after: one turn of 40 degrees (40x its normal) among the moves into or out of filled frames."""
+    from mocap_core.ik.kernels import axis_angle
+
+    frames = 400
+    positions = np.zeros((frames, N_JOINTS, 3))
+    positions[:, :, 0] = 0.001 * np.arange(frames)[:, None]
+    status = np.full((frames, N_JOINTS), int(Status.LOCATED))
+    bone = np.tile(np.eye(3), (frames, N_JOINTS, 1, 1))
+    k = INDEX["shoulder_l"]
+    angles = np.radians(np.arange(frames) + np.where(np.arange(frames) >= 200, 39.0, 0.0))
+    bone[:, k] = [axis_angle(np.array([0.0, 0.0, 1.0]), a) for a in angles]
+    status[200:, k] = Status.ESTIMATED
+    moves = real_gap_moves(positions, status, frames=bone)
+    assert len(moves.turned) == 200 and moves.row()["turns_over_30_deg"] == 1
+    assert moves.turned_deg.max() == pytest.approx(40.0) and moves.turned.max() == pytest.approx(40.0)
+    assert real_gap_moves(positions, status).row()["turns"] == 0  # (no frames given: no turns measured)
+
+
 def test_real_gap_moves_leave_the_actors_own_pace_out():
     """A joint that speeds up to 5 mm a frame (5x its normal 1 mm) is lost and found while it moves so, the
     fill going on at that pace: over 1.5x its normal motion at both changes, but not beyond its own pace.
@@ -126,12 +146,18 @@ def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
     assert list(rows) == ["thesis's method", "studio options without the blend", "studio options"]
     blend, without, thesis = rows["studio options"], rows["studio options without the blend"], rows["thesis's method"]
     assert int(blend["changes"]) > 500
-    assert int(blend["changes_over_1_5"]) * 5 < int(without["changes_over_1_5"]) < int(thesis["changes_over_1_5"])
-    assert float(blend["changes_max"]) < 3 < float(without["changes_max"])
-    # beyond the joints' own pace (the actor's fast moves left out) the blend's few are gone, the others' stay
-    assert int(blend["paced_over_1_5"]) * 10 < int(without["paced_over_1_5"]) < int(thesis["paced_over_1_5"])
+    # (stop 34: 3, 11 and 105; before its steady frames and kept partial landmarks the fill without the blend
+    # had 41, up to 9.9x, as a held hand swung with a flipped shoulder)
+    assert int(blend["changes_over_1_5"]) < int(without["changes_over_1_5"]) < int(thesis["changes_over_1_5"]) / 5
+    assert float(blend["changes_max"]) <= float(without["changes_max"]) < 3 < float(thesis["changes_max"])
+    # beyond the joints' own pace (the actor's fast moves left out) the blend's few are almost all gone
+    assert int(blend["paced_over_1_5"]) < int(without["paced_over_1_5"]) < int(thesis["paced_over_1_5"])
     assert float(blend["paced_max"]) <= float(blend["changes_max"])
-    assert int(blend["filled_over_3"]) < int(without["filled_over_3"])
+    assert int(blend["filled_over_3"]) == 0 < int(thesis["filled_over_3"])
+    # the bone frames a rig streams turn less at the fills than the thesis's method's (stop 34: 118 and 114
+    # against 137 and 121; 205 and 209 before that stop's partial landmarks and shape turn)
+    assert int(blend["turns_over_3"]) < int(thesis["turns_over_3"])
+    assert int(blend["turns_over_30_deg"]) < int(thesis["turns_over_30_deg"])
     # and it does not keep the output far off markers that are seen: 302 joint-frames over 100 mm, up to 0.78 m
     # (a kicking foot), before stop 29 let it move at a quarter of the joint's own step; 210, 0.49 m since
     assert int(blend["located_over_100mm"]) < 250 and float(blend["located_off_max_m"]) < 0.6
