@@ -98,6 +98,10 @@ results-beyond: $(STAMP)
 		--remove elbow_l --from 0.3 $(GAPS_BEYOND) --rebuild --report docs/results/elbow_walk_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
 		--remove elbow_l --from 1 --to 20 $(GAPS_BEYOND) --rebuild --report docs/results/elbow_karate_rebuild
+	$(BIN)/mocap eval gaps --take $(DANCE):dance1 --profile dance28 --remove shoulder_l --from 1 $(GAPS_BEYOND) --rebuild \
+		--report docs/results/shoulder_dance1_rebuild
+	$(BIN)/mocap eval gaps --take ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 \
+		--remove shoulder_l --from 1 --to 20 $(GAPS_BEYOND) --rebuild --report docs/results/shoulder_karate_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:dance1 \
 		--profile dance28 --remove knee_l,ankle_l --from 5 --to 15 $(GAPS_BEYOND) --pose-memory --report docs/results/knee_ankle_dance_memory
 	$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:walk1 \

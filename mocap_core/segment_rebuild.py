@@ -11,7 +11,9 @@ segment's seen markers, from the last frame they were seen with it, carries it:
 - foot: the malleoli sit on the ankle's hinge, so they keep their place among heel and toe;
 - shank: the femoral epicondyles sit on the knee's flexion axis, which the tibia turns about, so they
   (and the tibial tuberosity) keep their place among the malleoli (partners only) and the shank's
-  tracking markers.
+  tracking markers;
+- thorax: the acromion keeps its place among the trunk's markers (the other acromion, the spine's, the
+  sternum's), as near as the shoulder blade lets it.
 
 A profile's ``tracking`` markers (wands and clusters that no landmark names, e.g. the Qualisys set's
 forearm and shank wands) join their bone as partners: the sets without an olecranon marker can then
@@ -53,7 +55,7 @@ MIN_SHAFT_PARTNERS = 2
 # with two wrist markers 6 cm apart spreads 7-9 mm: enough.)
 MIN_SPREAD_M = 0.005
 REBUILD_HELP = ("beyond the thesis: a landmark that is the mean of several markers kept while one is seen (a lost one "
-                "carried by the markers nearest it); a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
+                "carried by the markers nearest it); a lost acromion carried with the trunk's markers; a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
                 "tracking markers), or of 2 along the bone (a tracking marker and a landmark; a forearm's rolled "
                 "by the upper arm's), or of markers on one line rolled by the bone above's; elbow, knee and ankle "
@@ -66,11 +68,19 @@ REBUILD_HELP = ("beyond the thesis: a landmark that is the mean of several marke
 # from the elbow's markers, a lost wrist came out 27 mm off on the sprint where the IK stage's swivel
 # gives 13 mm (the radius turns about the ulna). The malleoli are never rebuilt from the shank: a
 # lost ankle came out 45 mm off on the sprint that way, where the foot gives 2 mm.
+# A name is a landmark of the segment's side ("HLE": L_HLE on the left), of the other side ("other SAE"), or one
+# of the trunk's ("TV2").
 SEGMENTS = (
     ("forearm", ("HLE", "HME", "UOA"), ("RSP", "USP")),  # the elbow's axis, the olecranon, the styloids
     ("foot", ("FAL", "TAM", "FCC", "FM2"), ()),          # the ankle's axis (malleoli), heel and toe
     ("shank", ("FLE", "FME", "TTC"), ("FAL", "TAM")),    # the knee's axis, the tibia, the ankle's axis
+    ("thorax", ("SAE",), ("other SAE", "TV2", "TV12", "SME")),  # the acromion with the trunk (below)
 )
+# The acromion rides the shoulder blade, which slides on the ribs, but far less than a lost one's stand-ins
+# moved: the chest then fell back to other markers (it turned up to 50 degrees in a frame on the Vicon take) and
+# the shoulder joint to the arm's IK. Shoulder hidden from 1 s (studio options): dance1 109 / 262 mm, the Vicon
+# take 77 / 302; the acromion carried with the trunk from 1 s on (the other acromion, both spine markers and the
+# sternum, rigidly) is 4-41 mm off on average over the eight takes (the Vicon take's, with three of them, 38-41).
 # A joint's landmarks belong to the bone above as well: once their own bone's motion has put them, they
 # are moved to keep their learned distances to that bone's tracking markers (bone lengths are constant,
 # and skin slides: a fit's rotation errors grow away from its markers). Sprint elbow joint: 22 / 74 mm from
@@ -86,7 +96,7 @@ SEGMENTS = (
 ALSO_ON = {"forearm": (("HLE", "HME"), "upper_arm", True),
            "foot": (("FAL", "TAM"), "shank", False),
            "shank": (("FLE", "FME"), "thigh", False)}
-assert {bone for bone, _, _ in SEGMENTS} | {above for _, above, _ in ALSO_ON.values()} <= set(TRACKING_BONES)
+assert set(ALSO_ON) | {above for _, above, _ in ALSO_ON.values()} <= set(TRACKING_BONES)
 DISTANCE_RATE = 1 / 100  # how fast a learned distance follows the frames where both points are measured
 DISTANCE_PRIOR = 0.1     # weight of the rigid estimate against the distances (per squared metre)
 # Then a second pass keeps the distances to the tracking markers alone, firmly (the estimate's weight
@@ -135,10 +145,17 @@ def segment_table(tracking_of: Sequence[str] = ()
     def tracks(name):
         return [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == name]
 
+    def landmark(side, name):
+        if name in LANDMARK_INDEX:  # the trunk's
+            return LANDMARK_INDEX[name]
+        if name.startswith("other "):
+            return LANDMARK_INDEX[f"{'R' if side == 'L' else 'L'}_{name.removeprefix('other ')}"]
+        return LANDMARK_INDEX[f"{side}_{name}"]
+
     rows, counts = [], []
     for side in ("L", "R"):
         for bone, rebuilt, partners in SEGMENTS:
-            rigid = [LANDMARK_INDEX[f"{side}_{name}"] for name in rebuilt + partners] + tracks(f"{side}_{bone}")
+            rigid = [landmark(side, name) for name in rebuilt + partners] + tracks(f"{side}_{bone}")
             refined, above, own_too = ALSO_ON.get(bone, ((), "", False))
             distance_only = tracks(f"{side}_{above}") if above else []
             assert rebuilt[:len(refined)] == refined  # the refined ones lead the rebuilt ones
