@@ -19,6 +19,7 @@ from mocap_core.pose_memory import CAPACITY, PoseMemory  # noqa: E402
 from mocap_core.profiles import LANDMARK_INDEX  # noqa: E402
 from mocap_core.profiles import load_profile  # noqa: E402
 from mocap_core.recordings import read_recording  # noqa: E402
+from mocap_core.partial_means import PartialMeans  # noqa: E402
 from mocap_core.segment_rebuild import SegmentRebuilder  # noqa: E402
 from mocap_core.warmup import warm_up  # noqa: E402
 
@@ -55,6 +56,7 @@ def main():
     pose_memory_cost()
     rebuild_cost()
     leg_hinge_cost()
+    partial_means_cost()
 
 
 def rebuild_cost():
@@ -114,6 +116,24 @@ def pose_memory_cost():
     recalled = per_call_us(lambda i: memory.fill(lost[i].copy(), None, tracking[i], t0 + i / rec.rate_hz), n)
     print(f"pose memory ({CAPACITY} poses a leg), us per frame: legs seen {seen:.1f}, "
           f"one leg's knee and ankle recalled {recalled:.1f}")
+
+
+def partial_means_cost():
+    """The partial means on the Vicon take (its ten mean landmarks): every marker seen, and one shoulder marker
+    lost in every frame (its acromion kept from the other and turned with the 4 markers nearest it)."""
+    rec = read_recording(DATA / "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d")
+    lmap = load_profile("vicon53").resolve(rec.labels)
+    whole = np.isfinite(rec.positions).all(axis=2)
+    frames = np.flatnonzero(whole[:, lmap.idx[LANDMARK_INDEX["L_SAE"]][:2]].all(axis=1))[:300]
+    means = PartialMeans(lmap)
+    back = [label.split(":")[-1] for label in rec.labels].index("LBSH")
+    lost = rec.positions.copy()
+    lost[:, back] = np.nan
+    seen = per_call_us(lambda i: means.fill(rec.positions[frames[i]], lmap.apply(rec.positions[frames[i]])),
+                       len(frames))
+    kept = per_call_us(lambda i: means.fill(lost[frames[i]], lmap.apply(lost[frames[i]])), len(frames))
+    print(f"partial means (Vicon), us per frame: all seen {seen:.1f}, one shoulder marker lost {kept:.1f} "
+          "(the map's own gather included)")
 
 
 if __name__ == "__main__":
