@@ -54,14 +54,15 @@ MIN_SHAFT_PARTNERS = 2
 # markers, say): they must spread at least this far (RMS) from their best line. (An elbow marker
 # with two wrist markers 6 cm apart spreads 7-9 mm: enough.)
 MIN_SPREAD_M = 0.005
-REBUILD_HELP = ("beyond the thesis: a landmark that is the mean of several markers kept while one is seen (a lost one "
-                "carried by the markers nearest it); a lost acromion carried with the trunk's markers; a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
+REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
                 "tracking markers), or of 2 along the bone (a tracking marker and a landmark; a forearm's rolled "
                 "by the upper arm's), or of markers on one line rolled by the bone above's; elbow, knee and ankle "
                 "held to the upper arm's, thigh's and shank's markers; then a lost knee and ankle from the hip and "
                 "one shank marker, or the ankle (the leg hinge), which also turns a knee rebuilt from 2 to keep its "
-                "distances from the hip")
+                "distances from the hip; a lost acromion carried with the trunk's markers; and a landmark that is "
+                "the mean of several markers, still lost, kept while some are seen (a lost one keeps its offset, "
+                "turned as the markers nearest it turn)")
 # Rigid bodies of landmarks: (bone, rebuilt when lost, partners only), in the order they are rebuilt:
 # the shank's partners include the malleoli the foot may have rebuilt just before. The profile's
 # tracking markers of a bone (wands, clusters) join it as partners. The styloids only help: rebuilt

@@ -3,8 +3,8 @@
 Reads ``markers/raw`` (the recording's own labels) and publishes ``markers/filled``: one marker per
 landmark of the profile (the PAF names, mocap_core.profiles.LANDMARKS), so every later stage is
 independent of the marker set. Flags: measured, interpolated (the pelvis markers this node
-predicted, and with ``rebuild`` the forearm, foot and shank landmarks it rebuilt, with the help of the
-profile's tracking markers, the knees and ankles the leg hinge put, and the landmarks still lost that are the
+predicted, and with ``rebuild`` the forearm, foot, shank and acromion landmarks it rebuilt, with the help of
+the profile's tracking markers, the knees and ankles the leg hinge put, and the landmarks still lost that are the
 mean of several markers of which some are seen (mocap_core.partial_means); with ``pose_memory`` the
 knee and ankle landmarks it recalled from the take's earlier poses) or missing.
 """
