@@ -273,9 +273,12 @@ def run_real_gaps(args) -> int:
         pipe = SkeletonPipeline(profile, rec.labels, beyond=beyond, rate_hz=rec.rate_hz, fill_options=options)
         chunks = list(pipe.run(rec.positions))
         status = np.concatenate([c.status for c in chunks])
-        solved[name] = (np.concatenate([c.positions for c in chunks]), status)
-        results[name] = real_gap_moves(solved[name][0], status, frames=np.concatenate([c.frames for c in chunks]))
-    lag = blend_lag(*solved["studio options"], *solved["studio options without the blend"])
+        positions, frames = np.concatenate([c.positions for c in chunks]), np.concatenate([c.frames for c in chunks])
+        solved[name] = (positions, status, frames)
+        results[name] = real_gap_moves(solved[name][0], status, frames=solved[name][2])
+    (blended, blended_status, blended_frames), (plain, plain_status, plain_frames) = (
+        solved["studio options"], solved["studio options without the blend"])
+    lag = blend_lag(blended, blended_status, plain, plain_status, blended_frames, plain_frames)
     missing = float(np.mean(~np.isfinite(rec.positions).all(axis=2)))
     filled = float(np.mean(np.isin(status, (Status.ESTIMATED, Status.HELD))))
     md = [f"{rec.source.split('/')[-1]} ({rec.n_frames} frames at {rec.rate_hz:g} Hz, {missing:.1%} of its markers "

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import axis_angle, mm, mtv, mv, rotation_between, vcross, vdot, vnorm
+from mocap_core.ik.kernels import axis_angle, frames_to_quats, mm, mtv, mv, rotation_between, vcross, vdot, vnorm
 
 MISSING, LOCATED, ESTIMATED, HELD = 0, 1, 2, 3   # mocap_core.skeleton.Status
 MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
@@ -427,6 +427,10 @@ class BlendState:
     prev_raw: np.ndarray      # (n, 3) the source's position a frame before last_raw
     prev_vel: np.ndarray      # (n, 3) and its step then
     course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
+    last_frame: np.ndarray    # (n, 3, 3) the last output bone frame (NaN: none)
+    turn_axis: np.ndarray     # (n, 3) the frame's offset where its source changed: a turn about this axis
+    turn: np.ndarray          # (n, 3) by this angle (radians, column 0) times the spring's share (1), and its
+    #                           velocity (2)
     step: float = 0.0
     omega: float = 0.0
     course_on: bool = True    # blend_course: after a loss, leave the markers' course as course_weight says
@@ -438,7 +442,8 @@ class BlendState:
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
-                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan), step,
+                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan),
+                   np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
                    BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
     @property
@@ -453,11 +458,52 @@ class BlendState:
             self.frame_s = step
         self.last_time_s = time_s
 
-    def blend(self, positions, status, idx) -> None:
+    def blend(self, positions, status, idx, frames=None) -> None:
+        """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone
+        frames, are blended too where given (blend_frames, with the spring's half-life)."""
+        if frames is not None and self.omega > 0:  # (before blend_transitions, which moves last_status on)
+            blend_frames(frames, status, idx, self.last_status, self.has_last, self.last_frame, self.turn_axis,
+                         self.turn, self.omega, self.frame_s)
         blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
                           self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
                           self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
                           self.frame_s, self.course_on, self.prev_raw, self.prev_vel, self.course_len)
+
+
+@njit(cache=True)
+def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_axis, turn, omega, dt):
+    """A joint's bone frame that changes source (its markers lost or back, a fill handed to another) goes on from
+    the frame it had, and the turn between the two dies out as a critically damped spring (the positions' blend,
+    for the bone frames a rig streams), in place. The Vicon take's left wrist, handed between its sliding markers
+    and the swivel's fill, turned up to 174 degrees in a frame there."""
+    decay = math.exp(-omega * dt)
+    for k in range(idx.shape[0]):
+        j = idx[k]
+        frame = frames[j].copy()
+        s, was = status[j], last_status[k]
+        if not all_finite(frame):
+            last_frame[k] = np.nan
+            turn[k, 1] = 0.0
+            continue
+        if has_last[0] and s != was and s != MISSING and was != MISSING and all_finite(last_frame[k]):
+            offset = mm(last_frame[k], frame.T.copy())  # the old frame, less the new one
+            q = frames_to_quats(offset.reshape(1, 3, 3))[0]
+            size = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+            if size > 1e-12:
+                turn_axis[k] = q[:3] / size
+                turn[k, 0], turn[k, 1], turn[k, 2] = 2.0 * math.atan2(size, q[3]), 1.0, 0.0
+            else:
+                turn[k, 1] = 0.0
+        elif turn[k, 1] != 0.0:
+            spring = turn[k, 2] + omega * turn[k, 1]
+            turn[k, 1] = decay * (turn[k, 1] + spring * dt)
+            turn[k, 2] = decay * (turn[k, 2] - spring * omega * dt)
+            if abs(turn[k, 1]) < 1e-4:
+                turn[k, 1] = 0.0
+        if turn[k, 1] != 0.0:
+            frame = mm(axis_angle(turn_axis[k], turn[k, 0] * turn[k, 1]), frame)
+            frames[j] = frame
+        last_frame[k] = frame
 
 
 @njit(cache=True)

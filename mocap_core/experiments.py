@@ -273,27 +273,42 @@ class BlendLag:
     over_100mm: int
     largest_m: float
     worst: tuple[str, int]       # (joint, frame) of the largest
+    # and the bone frames, where given: located joint-frames whose frame is turned off the markers' by over 30
+    # degrees, and the largest turn (degrees)
+    frames_over_30_deg: int = 0
+    frames_largest_deg: float = float("nan")
 
     def row(self) -> dict:
         return {"located_over_50mm": self.over_50mm, "located_over_100mm": self.over_100mm,
-                "located_off_max_m": self.largest_m}
+                "located_off_max_m": self.largest_m, "located_frames_over_30_deg": self.frames_over_30_deg,
+                "located_frames_off_max_deg": self.frames_largest_deg}
 
     def sentence(self) -> str:
+        turned = "" if not np.isfinite(self.frames_largest_deg) else (
+            f" Its bone frames are turned off the markers' by over 30 degrees in {self.frames_over_30_deg} of them, "
+            f"at most {self.frames_largest_deg:.0f} degrees.")
         return (f"With the blend, the output is off its seen markers by over 50 mm in {self.over_50mm} of "
                 f"{self.located} located joint-frames (over 100 mm in {self.over_100mm}), at most "
                 f"{self.largest_m * 1000:.0f} mm ({self.worst[0]} at frame {self.worst[1]}): what is left of an "
-                "offset where markers came back, eased out at the blend's pace.")
+                "offset where markers came back, eased out at the blend's pace." + turned)
 
 
 def blend_lag(blended: np.ndarray, blended_status: np.ndarray, plain: np.ndarray,
-              plain_status: np.ndarray) -> BlendLag:
+              plain_status: np.ndarray, blended_frames: np.ndarray | None = None,
+              plain_frames: np.ndarray | None = None) -> BlendLag:
     """``blended`` / ``plain``: (F, joints, 3) positions of one take solved with and without the blend, and
-    their (F, joints) status."""
+    their (F, joints) status; their (F, joints, 3, 3) bone frames if those are to be compared too."""
     both = (blended_status == Status.LOCATED) & (plain_status == Status.LOCATED)
     off = np.nan_to_num(np.where(both, np.linalg.norm(blended - plain, axis=-1), 0.0))
     f, j = np.unravel_index(int(np.argmax(off)), off.shape)
-    return BlendLag(int(both.sum()), int((off > 0.05).sum()), int((off > 0.1).sum()), float(off[f, j]),
-                    (JOINTS[j], int(f)))
+    lag = BlendLag(int(both.sum()), int((off > 0.05).sum()), int((off > 0.1).sum()), float(off[f, j]),
+                   (JOINTS[j], int(f)))
+    if blended_frames is not None and plain_frames is not None:
+        relative = np.einsum("fjab,fjac->fjbc", blended_frames, plain_frames)
+        cos = np.clip((np.trace(relative, axis1=2, axis2=3) - 1) / 2, -1.0, 1.0)
+        turned = np.nan_to_num(np.where(both, np.degrees(np.arccos(cos)), 0.0))
+        lag.frames_over_30_deg, lag.frames_largest_deg = int((turned > 30).sum()), float(turned.max())
+    return lag
 
 
 PACE_WINDOW = 10  # frames either side of a change of status searched for the joint's own pace

@@ -192,7 +192,7 @@ class LimbFiller:
                    self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
                    p.escape_max_deg, out)
         if self.blend.on:
-            self.blend.blend(positions, status, idx)
+            self.blend.blend(positions, status, idx, frames)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 

@@ -530,3 +530,30 @@ def test_a_fill_further_off_than_the_bound_takes_over_without_a_twitch():
     apart = np.linalg.norm(out - (truth + far), axis=1)
     assert apart[loss] == pytest.approx(0.8)
     assert apart[loss:].max() <= 0.8 + 1e-9
+
+
+def test_a_bone_frame_that_changes_source_turns_on_smoothly_known_answer():
+    """A joint's frame turns 1 degree a frame about z while its markers are seen; from frame 20 its fill's frame is
+    90 degrees off about x (the Vicon take's left wrist: its fill and its sliding markers up to 174 degrees apart),
+    and from frame 80 the markers are back. The output's frame never turns more than 6 degrees in a frame (the
+    source's own turn and a spring's share of the offset), and it ends on the source's frame."""
+    from mocap_core.ik.kernels import axis_angle
+
+    rate_hz, frames_n = 120.0, 140
+    blend = af.BlendState.empty(1, 0.01, HALF_LIFE, True)
+    off = axis_angle(np.array([1.0, 0.0, 0.0]), np.pi / 2)
+    out = []
+    for f in range(frames_n):
+        blend.advance_clock(f / rate_hz)
+        filled = 20 <= f < 80
+        source = axis_angle(np.array([0.0, 0.0, 1.0]), np.radians(f))
+        frames = (off @ source if filled else source).reshape(1, 3, 3).copy()
+        positions = (START + VELOCITY * f / rate_hz).reshape(1, 3).copy()
+        blend.blend(positions, np.array([ESTIMATED if filled else LOCATED], np.int64), np.array([0]), frames)
+        out.append(frames[0].copy())
+        if f in (79, frames_n - 1):
+            want = off @ source if f == 79 else source
+            assert np.degrees(np.arccos(np.clip((np.trace(out[-1].T @ want) - 1) / 2, -1, 1))) < 1.0
+    turns = [np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))) for a, b in zip(out, out[1:])]
+    assert max(turns) < 6.0, max(turns)
+    assert np.degrees(np.arccos(np.clip((np.trace(out[20].T @ out[19]) - 1) / 2, -1, 1))) < 1.0  # (went on as it was)
