@@ -191,7 +191,7 @@ def _bend_sin(first, second):
 @njit(cache=True)
 def shape_turn(first_before, second_before, first, second):
     """The rotation that carries two bones' last shape onto their new one: the least rotation of the second
-    bone, then the roll about it that turns their plane with them, taken whole once both shapes bend by
+    bone, then the least roll about it that turns their plane with them, taken whole once both shapes bend by
     STRAIGHT_SIN + PLANE_RANGE and not at all below STRAIGHT_SIN (a nearly straight shape's plane is noise)."""
     least = rotation_between(second_before, second)
     bend = min(_bend_sin(first_before, second_before), _bend_sin(first, second))
@@ -202,6 +202,13 @@ def shape_turn(first_before, second_before, first, second):
     rolled = mv(least, _plane_frame(first_before, second_before)[:, 1].copy())
     plane_y = _plane_frame(first, second)[:, 1].copy()
     roll = math.atan2(vdot(axis, vcross(rolled, plane_y)), vdot(rolled, plane_y))
+    # a plane, not a side of it: a lone joint that crosses its neighbours' line between two frames (a wrist bent
+    # 6 degrees with a 47 mm hand, 5 mm aside) flips its bend's side, not its bone by a half turn (the Vicon
+    # take's right wrist turned 180 degrees in a frame at frame 945 so); no bone rolls 90 degrees in a frame
+    if roll > 0.5 * math.pi:
+        roll -= math.pi
+    elif roll < -0.5 * math.pi:
+        roll += math.pi
     return mm(axis_angle(axis, share * roll), least)
 
 
@@ -472,12 +479,13 @@ class BlendState:
 
 @njit(cache=True)
 def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_axis, turn, omega, dt):
-    """A joint's bone frame that changes source (its markers lost or back, a fill handed to another) goes on from
-    the frame it had, and the turn between the two dies out as a critically damped spring (the positions' blend,
+    """A joint's bone frame that changes source (its or a neighbour's markers lost or back, a fill handed to
+    another) goes on from the frame it had, and the turn between the two dies out as a critically damped spring (the positions' blend,
     for the bone frames a rig streams), in place. The Vicon take's left wrist, handed between its sliding markers
     and the swivel's fill, turned up to 174 degrees in a frame there."""
     decay = math.exp(-omega * dt)
-    for k in range(idx.shape[0]):
+    n = idx.shape[0]
+    for k in range(n):
         j = idx[k]
         frame = frames[j].copy()
         s, was = status[j], last_status[k]
@@ -485,7 +493,13 @@ def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_ax
             last_frame[k] = np.nan
             turn[k, 1] = 0.0
             continue
-        if has_last[0] and s != was and s != MISSING and was != MISSING and all_finite(last_frame[k]):
+        # a frame is built from its joint and the joints either side (a bone's frame runs to the next joint, the
+        # hand's is the wrist's): a change of source of any of them is one of the frame's
+        changed = s != was and s != MISSING and was != MISSING
+        for m in (k - 1, k + 1):
+            if 0 <= m < n and status[idx[m]] != last_status[m]:
+                changed = True
+        if has_last[0] and changed and all_finite(last_frame[k]):
             offset = mm(last_frame[k], frame.T.copy())  # the old frame, less the new one
             q = frames_to_quats(offset.reshape(1, 3, 3))[0]
             size = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])

@@ -532,6 +532,24 @@ def test_a_fill_further_off_than_the_bound_takes_over_without_a_twitch():
     assert apart[loss:].max() <= 0.8 + 1e-9
 
 
+def test_a_bone_frame_whose_neighbour_changes_source_turns_on_smoothly():
+    """A hand stays located while its wrist is lost: the hand's frame (the wrist's, in localization) is the fill's
+    from then on. Its jump of 60 degrees is eased like its own change of source would be."""
+    from mocap_core.ik.kernels import axis_angle
+
+    blend = af.BlendState.empty(2, 0.01, HALF_LIFE, True)
+    jump = axis_angle(np.array([0.0, 1.0, 0.0]), np.radians(60))
+    out = []
+    for f in range(80):
+        blend.advance_clock(f / 120.0)
+        frames = np.stack([np.eye(3), jump if f >= 10 else np.eye(3)])
+        status = np.array([ESTIMATED if f >= 10 else LOCATED, LOCATED], np.int64)
+        blend.blend(np.zeros((2, 3)), status, np.array([0, 1]), frames)
+        out.append(frames[1].copy())
+    turns = [np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))) for a, b in zip(out, out[1:])]
+    assert max(turns) < 6.0 and np.degrees(np.arccos(np.clip((np.trace(out[-1].T @ jump) - 1) / 2, -1, 1))) < 2.0
+
+
 def test_a_bone_frame_that_changes_source_turns_on_smoothly_known_answer():
     """A joint's frame turns 1 degree a frame about z while its markers are seen; from frame 20 its fill's frame is
     90 degrees off about x (the Vicon take's left wrist: its fill and its sliding markers up to 174 degrees apart),

@@ -155,12 +155,13 @@ def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
     assert float(blend["paced_max"]) <= float(blend["changes_max"])
     assert int(blend["filled_over_3"]) == 0 < int(thesis["filled_over_3"])
     # the bone frames a rig streams turn less at the fills than the thesis's method's, and far less with the
-    # blend's frames (stop 34: 31 and 34 turns over 3x and over 30 degrees, 119 and 113 without the blend, the
+    # blend's frames (stop 34: 23 and 21 turns over 3x and over 30 degrees, 116 and 114 without the blend, the
     # thesis's method 137 and 121; 205 and 209 before that stop's steady frames), at a cost the sentence gives:
-    # located frames turned off their markers' while an offset eases out
+    # located frames turned off their markers' while an offset eases out (924, 796 of them on the left arm,
+    # whose wrist markers slide and flip its located frames)
     assert int(blend["turns_over_3"]) * 2 < int(without["turns_over_3"]) < int(thesis["turns_over_3"])
     assert int(blend["turns_over_30_deg"]) * 2 < int(without["turns_over_30_deg"]) < int(thesis["turns_over_30_deg"])
-    assert 0 < int(blend["located_frames_over_30_deg"]) < 0.02 * 27744
+    assert 0 < int(blend["located_frames_over_30_deg"]) < 0.05 * 27744
     # and it does not keep the output far off markers that are seen: 302 joint-frames over 100 mm, up to 0.78 m
     # (a kicking foot), before stop 29 let it move at a quarter of the joint's own step; 210, 0.49 m since
     assert int(blend["located_over_100mm"]) < 250 and float(blend["located_off_max_m"]) < 0.6

@@ -220,6 +220,11 @@ def test_a_lost_joints_frame_turns_with_its_bones_plane_only_where_they_bend_kno
     before = shape_turn(first + aside, straight - aside, first - aside, straight + aside)
     assert _turn_deg(before) < 1.0
     assert STRAIGHT_SIN > np.sin(np.radians(2))
+    # bent 11 degrees to one side, then to the other (the joint crossed its neighbours' line): its plane is the
+    # same plane, so no roll, only the second bone's least turn (not a half turn's share: 105 degrees)
+    side, other = np.array([0.0, 0.02, -0.1]), np.array([0.0, -0.02, -0.1])
+    crossed = shape_turn(first, side, first, other)
+    assert _turn_deg(crossed) == pytest.approx(_turn_deg(rotation_between(side, other)), abs=1e-6)
 
 
 def test_a_lost_shoulders_frame_does_not_flip_where_its_acromion_flickers():
