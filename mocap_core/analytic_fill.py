@@ -478,11 +478,19 @@ class BlendState:
 
 
 @njit(cache=True)
+def spring_step(x, v, omega, dt, decay):
+    """One step of a critically damped spring towards 0 from ``x`` at velocity ``v`` (Holden's exact form for any
+    ``dt``; ``decay`` = exp(-omega dt)): the new (x, v). For a number or a vector."""
+    spring = v + omega * x
+    return decay * (x + spring * dt), decay * (v - spring * omega * dt)
+
+
+@njit(cache=True)
 def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_axis, turn, omega, dt):
     """A joint's bone frame that changes source (its or a neighbour's markers lost or back, a fill handed to
-    another) goes on from the frame it had, and the turn between the two dies out as a critically damped spring (the positions' blend,
-    for the bone frames a rig streams), in place. The Vicon take's left wrist, handed between its sliding markers
-    and the swivel's fill, turned up to 174 degrees in a frame there."""
+    another) goes on from the frame it had, and the turn between the two dies out as a critically damped spring
+    (the positions' blend, for the bone frames a rig streams), in place. The Vicon take's left wrist, handed
+    between its sliding markers and the swivel's fill, turned up to 174 degrees in a frame there."""
     decay = math.exp(-omega * dt)
     n = idx.shape[0]
     for k in range(n):
@@ -509,9 +517,7 @@ def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_ax
             else:
                 turn[k, 1] = 0.0
         elif turn[k, 1] != 0.0:
-            spring = turn[k, 2] + omega * turn[k, 1]
-            turn[k, 1] = decay * (turn[k, 1] + spring * dt)
-            turn[k, 2] = decay * (turn[k, 2] - spring * omega * dt)
+            turn[k, 1], turn[k, 2] = spring_step(turn[k, 1], turn[k, 2], omega, dt, decay)
             if abs(turn[k, 1]) < 1e-4:
                 turn[k, 1] = 0.0
         if turn[k, 1] != 0.0:
@@ -599,9 +605,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             _take_step(raw_vel[k], raw - last_raw[k], last_raw[k] - prev_raw[k], SOURCE_JUMP_M_S * dt)
         limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
         before = offset[k].copy()
-        spring = offset_vel[k] + omega * before
-        offset[k] = decay * (before + spring * dt)
-        offset_vel[k] = decay * (offset_vel[k] - spring * omega * dt)
+        offset[k], offset_vel[k] = spring_step(before, offset_vel[k], omega, dt, decay)
         moved = vnorm(offset[k] - before)
         if step > 0 and moved > limit:
             offset[k] = before + (offset[k] - before) * (limit / moved)
