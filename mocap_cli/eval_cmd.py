@@ -94,7 +94,8 @@ def add_parser(sub) -> None:
                                      "to another) and on every move into or out of a filled frame, next to each "
                                      "joint's normal per-frame motion (95th percentile of its located moves) "
                                      "and, at a change of status, to its own pace in the located frames on "
-                                     "either side (a twitch is faster than both).")
+                                     "either side (a twitch is faster than both); and how the filled joints' bone "
+                                     "frames turn there (what a rig streams), next to each joint's normal turn.")
     rg.add_argument("--take", default=str(REPO.parent / "shared" / "data" /
                                           "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"),
                     help="recording with gaps (default: the Vicon free-form take, 6.6%% of its markers missing)")
