@@ -39,6 +39,7 @@ class PartialMeans:
 
     def __init__(self, landmark_map: LandmarkMap):
         self.map = landmark_map
+        self.count = landmark_map.count.astype(np.int64)
         self.means = np.flatnonzero(landmark_map.count > 1)
         self.last_whole = np.full((len(self.means), landmark_map.n_labels, 3), np.nan)
         self.turns = np.tile(np.eye(3), (len(self.means), 1, 1))  # and how its nearest markers turned since
@@ -48,8 +49,8 @@ class PartialMeans:
         fills before, its lost ones filled in place; returns the mask of the landmarks filled."""
         filled = np.zeros(len(landmarks), bool)
         if len(self.means):
-            _fill_means(np.asarray(markers, np.float64), landmarks, self.map.idx, self.map.count.astype(np.int64),
-                        self.means, self.last_whole, self.turns, filled)
+            _fill_means(np.asarray(markers, np.float64), landmarks, self.map.idx, self.count, self.means,
+                        self.last_whole, self.turns, filled)
         return filled
 
     def fill_landmarks(self, markers: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
