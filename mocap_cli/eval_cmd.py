@@ -276,7 +276,7 @@ def run_real_gaps(args) -> int:
         status = np.concatenate([c.status for c in chunks])
         positions, frames = np.concatenate([c.positions for c in chunks]), np.concatenate([c.frames for c in chunks])
         solved[name] = (positions, status, frames)
-        results[name] = real_gap_moves(solved[name][0], status, frames=solved[name][2])
+        results[name] = real_gap_moves(positions, status, frames=frames)
     (blended, blended_status, blended_frames), (plain, plain_status, plain_frames) = (
         solved["studio options"], solved["studio options without the blend"])
     lag = blend_lag(blended, blended_status, plain, plain_status, blended_frames, plain_frames)

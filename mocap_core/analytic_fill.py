@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import axis_angle, frames_to_quats, mm, mtv, mv, rotation_between, vcross, vdot, vnorm
+from mocap_core.ik.kernels import (angle_about, axis_angle, mm, mtv, mv, rotation_between, rotation_vector, vcross,
+                                   vdot, vnorm)
 
 MISSING, LOCATED, ESTIMATED, HELD = 0, 1, 2, 3   # mocap_core.skeleton.Status
 MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
@@ -201,7 +202,7 @@ def shape_turn(first_before, second_before, first, second):
     axis = second / vnorm(second)
     rolled = mv(least, _plane_frame(first_before, second_before)[:, 1].copy())
     plane_y = _plane_frame(first, second)[:, 1].copy()
-    roll = math.atan2(vdot(axis, vcross(rolled, plane_y)), vdot(rolled, plane_y))
+    roll = angle_about(axis, rolled, plane_y)
     # a plane, not a side of it: a lone joint that crosses its neighbours' line between two frames (a wrist bent
     # 6 degrees with a 47 mm hand, 5 mm aside) flips its bend's side, not its bone by a half turn (the Vicon
     # take's right wrist turned 180 degrees in a frame at frame 945 so); no bone rolls 90 degrees in a frame
@@ -508,12 +509,11 @@ def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_ax
             if 0 <= m < n and status[idx[m]] != last_status[m]:
                 changed = True
         if has_last[0] and changed and all_finite(last_frame[k]):
-            offset = mm(last_frame[k], frame.T.copy())  # the old frame, less the new one
-            q = frames_to_quats(offset.reshape(1, 3, 3))[0]
-            size = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
-            if size > 1e-12:
-                turn_axis[k] = q[:3] / size
-                turn[k, 0], turn[k, 1], turn[k, 2] = 2.0 * math.atan2(size, q[3]), 1.0, 0.0
+            offset = rotation_vector(mm(last_frame[k], frame.T.copy()))  # the old frame, less the new one
+            angle = vnorm(offset)
+            if angle > 1e-12:
+                turn_axis[k] = offset / angle
+                turn[k, 0], turn[k, 1], turn[k, 2] = angle, 1.0, 0.0
             else:
                 turn[k, 1] = 0.0
         elif turn[k, 1] != 0.0:

@@ -230,6 +230,18 @@ def transition_moves(run: GapRun, reference: np.ndarray, window: int = 3) -> lis
 
 
 # -- smoothness on a take's own gaps (no truth needed) -----------------------------------------------------
+def turn_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The turn from each bone frame of ``a`` (..., 3, 3) to its twin in ``b``, degrees (NaN where one is unknown)."""
+    relative = np.einsum("...ab,...ac->...bc", a, b)
+    cos = (np.trace(relative, axis1=-2, axis2=-1) - 1) / 2
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _turns_deg(frames: np.ndarray) -> np.ndarray:
+    """Per-frame turn of one joint's bone frames (F, 3, 3), degrees: F - 1 angles (NaN where a frame is unknown)."""
+    return turn_deg(frames[:-1], frames[1:])
+
+
 @dataclass
 class RealGapMoves:
     """How the filled joints of a solved take move, next to each joint's normal per-frame motion (the 95th
@@ -304,9 +316,7 @@ def blend_lag(blended: np.ndarray, blended_status: np.ndarray, plain: np.ndarray
     lag = BlendLag(int(both.sum()), int((off > 0.05).sum()), int((off > 0.1).sum()), float(off[f, j]),
                    (JOINTS[j], int(f)))
     if blended_frames is not None and plain_frames is not None:
-        relative = np.einsum("fjab,fjac->fjbc", blended_frames, plain_frames)
-        cos = np.clip((np.trace(relative, axis1=2, axis2=3) - 1) / 2, -1.0, 1.0)
-        turned = np.nan_to_num(np.where(both, np.degrees(np.arccos(cos)), 0.0))
+        turned = np.nan_to_num(np.where(both, turn_deg(blended_frames, plain_frames), 0.0))
         lag.frames_over_30_deg, lag.frames_largest_deg = int((turned > 30).sum()), float(turned.max())
     return lag
 
@@ -321,13 +331,6 @@ def _own_pace(step: np.ndarray, both: np.ndarray, change: int) -> float:
     after = np.flatnonzero(both[change + 1:change + 1 + PACE_WINDOW])
     pace = step[max(0, change - PACE_WINDOW) + before[-1]] if len(before) else 0.0
     return max(pace, step[change + 1 + after[0]]) if len(after) else pace
-
-
-def _turns_deg(frames: np.ndarray) -> np.ndarray:
-    """Per-frame turn of one joint's bone frames (F, 3, 3), degrees: F - 1 angles (NaN where a frame is unknown)."""
-    relative = np.einsum("fab,fac->fbc", frames[:-1], frames[1:])
-    cos = (np.trace(relative, axis1=1, axis2=2) - 1) / 2
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
 def real_gap_moves(positions: np.ndarray, status: np.ndarray, min_located: int = 100,

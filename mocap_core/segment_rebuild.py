@@ -32,13 +32,13 @@ carry gives 4 mm) and the hand with the forearm (a wrist flexes).
 """
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import axis_angle, best_roll, follow, mv, rigid_fit_first, rotation_between, vfinite, vnorm
+from mocap_core.ik.kernels import (angle_about, axis_angle, best_roll, follow, mv, rigid_fit_first, rotation_between,
+                                   vfinite, vnorm)
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, TRACKING_BONES
 
 MIN_PARTNERS = 3
@@ -297,9 +297,7 @@ def _line_carry(before0, before1, after0, after1):
 def _turned_toward(p, pivot, toward, target):
     """``p`` turned about the line from ``pivot`` toward ``toward`` to the side of it where ``target`` is."""
     line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
-    u, w = p - pivot, target - pivot
-    u, w = u - (line @ u) * line, w - (line @ w) * line
-    return pivot + mv(axis_angle(line, math.atan2(line @ np.cross(u, w), u @ w)), p - pivot)
+    return pivot + mv(axis_angle(line, angle_about(line, p - pivot, target - pivot)), p - pivot)
 
 
 @njit(cache=True)

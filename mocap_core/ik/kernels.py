@@ -100,12 +100,22 @@ def axis_angle(axis, angle):
 
 @njit(cache=True)
 def rotation_vector(R):
-    """The rotation vector (unit axis times angle) of a rotation matrix, the inverse of axis_angle."""
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(angle) axis
-    s = vnorm(v)
+    """The rotation vector (unit axis times angle, 0 to 180 degrees) of a rotation matrix, the inverse of
+    axis_angle. Through its quaternion, so a turn near a half one keeps its axis (the matrix's antisymmetric part,
+    2 sin(angle) axis, fades there)."""
+    q = frames_to_quats(np.ascontiguousarray(R).reshape(1, 3, 3))[0]
+    s = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])  # sin(angle / 2)
     if s < 1e-15:
-        return np.zeros(3)  # (the turns kept here are a few degrees, never near 180)
-    return v * (math.atan2(s, R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / s)
+        return np.zeros(3)
+    return q[:3] * (2.0 * math.atan2(s, q[3]) / s)
+
+
+@njit(cache=True)
+def angle_about(axis, a, b):
+    """The signed angle (radians) that turns ``a`` to ``b`` about the unit ``axis``, both seen across it."""
+    a = a - vdot(a, axis) * axis
+    b = b - vdot(b, axis) * axis
+    return math.atan2(vdot(axis, vcross(a, b)), vdot(a, b))
 
 
 @njit(cache=True)
