@@ -265,8 +265,9 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                 rot, t = rigid_fit_first(before, after, n)
             elif n == MIN_SHAFT_PARTNERS and shaft == 1:
                 rot, t = _line_carry(before[0], before[1], after[0], after[1])
-                rolled = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k])
-                forearm_roll = rolled
+                forearm_roll = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen,
+                                                                                              distance[s, k])
+                rolled = forearm_roll
             elif n >= 2 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k]):
                 i, j = _farthest(before, n)
                 rot, t = _line_carry(before[i], before[j], after[i], after[j])
