@@ -625,9 +625,17 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         course[k] += course_step[k]
         # a lone joint's course keeps its distances to its located neighbours, turning with them (an elbow swings
         # about the shoulder; its markers' straight course flies off the arm). Once one is lost it goes on
-        # straight from where it is. Stop 30, short gaps: dance2's elbows 9.5 / 9.6 -> 7.3 / 7.1 mm
+        # straight from where it is. Stop 30, short gaps: dance2's elbows 9.5 / 9.6 -> 7.3 / 7.1 mm. Neighbours out
+        # of reach of those distances (skin that slid) leave a circle shrunk to a point on their line, which is not
+        # where the joint went: the course is pulled towards it by at most the step cap a frame (stop 35: the Vicon
+        # take's right upper arm stretched 233 -> 280 mm in 8 frames; lost for two, its shoulder's course jumped
+        # 36 mm onto that line, and its markers came back at 1.75x its own pace; 1.34x at most now)
         if all_finite(course_len[k]) and all_finite(neighbours):
-            course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0], course_len[k, 1])
+            on = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0], course_len[k, 1])
+            pull = vnorm(on - course[k])
+            if vnorm(neighbours[1] - neighbours[0]) > course_len[k, 0] + course_len[k, 1] and pull > limit:
+                on = course[k] + (on - course[k]) * (limit / pull)
+            course[k] = on
         else:
             course_len[k] = np.nan
         w = course_weight(since_loss[k], trust[k])

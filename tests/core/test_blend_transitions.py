@@ -423,10 +423,11 @@ def test_nearest_on_circle_known_answer():
 SWING_HZ = 1.0  # turns a second
 
 
-def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: int = 80):
+def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: int = 80, stretch: float = 0.0):
     """A shoulder, elbow and wrist (a bent arm: bones 0.3 and 0.25 m, 0.6 rad apart) swinging rigidly about the
     shoulder at a turn a second; the elbow's markers lost from ``lost_at``, its estimate BIAS off; the
-    wrist's from ``wrist_lost_at``, its estimate where it is. Returns per frame the blend's course for the
+    wrist's from ``wrist_lost_at``, its estimate where it is; from ``lost_at`` on the wrist goes ``stretch``
+    metres a frame further out from the shoulder (skin sliding). Returns per frame the blend's course for the
     elbow, whether one runs, and the truth (frames x 3 joints x 3)."""
     blend = af.BlendState.empty(3, 0.01, HALF_LIFE, True)
     courses, running, truths = [], [], []
@@ -435,6 +436,7 @@ def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: in
         angle = 2 * math.pi * SWING_HZ * f / rate_hz
         elbow = START + 0.3 * np.array([math.cos(angle), math.sin(angle), 0.0])
         wrist = elbow + 0.25 * np.array([math.cos(angle + 0.6), math.sin(angle + 0.6), 0.0])
+        wrist += stretch * max(f - lost_at, 0) * (wrist - START) / np.linalg.norm(wrist - START)
         truth = np.array([START, elbow, wrist])
         positions = truth.copy()
         status = np.full(3, LOCATED, np.int64)
@@ -480,6 +482,26 @@ def test_a_lone_joints_course_goes_on_straight_once_a_neighbour_is_lost():
     np.testing.assert_allclose(steps, np.tile(markers_step, (3, 1)), atol=1e-12)
     turned = np.diff(course[lost_at:wrist_lost_at], axis=0)  # (before, the circle turned it)
     assert np.linalg.norm(turned[-1] - markers_step) > 1e-3
+
+
+def test_a_lone_joints_course_out_of_its_neighbours_reach_leaves_its_straight_course_at_the_step_cap():
+    """The wrist slides away from the shoulder faster than the arm can reach: the circle of the elbow's distances
+    shrinks to a point on their line (the Vicon take's right upper arm stretched 233 -> 280 mm in 8 frames as its
+    shoulder was lost for two, and the course jumped 36 mm onto that line, 1.75x the shoulder's own pace where
+    the markers came back). Out of reach, the course is pulled towards the line by at most the step cap a frame."""
+    rate_hz, lost_at, cap = 120.0, 20, 0.01
+    course, running, truth = _swing(rate_hz, lost_at, stretch=0.015)
+    first = course[lost_at]
+    upper, lower = np.linalg.norm(first - truth[lost_at, 0]), np.linalg.norm(truth[lost_at, 2] - first)
+    markers_step = truth[lost_at - 1, 1] - truth[lost_at - 2, 1]
+    out = [f for f in np.flatnonzero(running) if f > lost_at
+           and np.linalg.norm(truth[f, 2] - truth[f, 0]) > upper + lower]
+    assert len(out) >= 5
+    pulled = [np.linalg.norm(course[f] - course[f - 1] - markers_step) for f in out]
+    assert max(pulled) <= cap + 1e-12, pulled
+    # (the line's point, where the circle had put it, is further than that from where the course went)
+    line = [af.nearest_on_circle(course[f - 1] + markers_step, truth[f, 0], truth[f, 2], upper, lower) for f in out]
+    assert max(np.linalg.norm(p - (course[f - 1] + markers_step)) for p, f in zip(line, out)) > 2 * cap
 
 
 def test_a_missing_frame_leaves_no_stale_step_behind():
