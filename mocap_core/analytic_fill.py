@@ -629,7 +629,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # of reach of those distances (skin that slid) leave a circle shrunk to a point on their line, which is not
         # where the joint went: the course is pulled towards it by at most the step cap a frame (stop 35: the Vicon
         # take's right upper arm stretched 233 -> 280 mm in 8 frames; lost for two, its shoulder's course jumped
-        # 36 mm onto that line, and its markers came back at 1.75x its own pace; 1.34x at most now)
+        # 36 mm onto that line, and its markers came back at 1.75x its own pace; 1.1x now)
         if all_finite(course_len[k]) and all_finite(neighbours):
             on = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0], course_len[k, 1])
             pull = vnorm(on - course[k])
@@ -706,9 +706,10 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
     then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
     hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones
-    keeps its distances to them, on their circle (stop 30). While a fill stands in, the output stays within MAX_APART_M
-    of it (stop 31). A flickering marker swings the offset back and forth
-    by the two sources' difference: nothing builds up.
+    keeps its distances to them, on their circle (stop 30); out of their reach, it is pulled towards their line
+    by no more than the step cap a frame (stop 35). While a fill stands in, the output stays within MAX_APART_M
+    of it (stop 31). A flickering marker swings the offset back and forth by the two sources' difference:
+    nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
