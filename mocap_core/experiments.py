@@ -172,7 +172,7 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     frame_s = 1.0 / rate_hz if rate_hz else float("nan")
     lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present).fill_landmarks(
         lm, tracking, np.arange(len(lm)) * frame_s)
-    if partial is not None:
+    if partial is not None:  # (given whole, not LandmarkFills' own: it would keep the hidden landmarks from markers)
         kept = partial[1] & ~hidden_lm & np.isnan(lm).any(axis=2)
         lm[kept] = partial[0][kept]
         rebuilt = kept if rebuilt is None else rebuilt | kept

@@ -1,5 +1,5 @@
-"""The landmark-level gap fills, in their order: the segment rebuild (with the leg hinge), then the
-pose memory.
+"""The landmark-level gap fills, in their order: the segment rebuild (with the leg hinge), the pose memory,
+then the partial means (with the rebuild).
 
 One place for how they go together, used by the hip node, the offline pipeline and `mocap eval gaps`:
 each fills only what the ones before could not, and never learns from what they filled.
@@ -11,25 +11,31 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from mocap_core.leg_hinge import LegHinge
+from mocap_core.partial_means import PartialMeans
 from mocap_core.pose_memory import PoseMemory
+from mocap_core.profiles import LandmarkMap
 from mocap_core.segment_rebuild import SegmentRebuilder
 
 
 class LandmarkFills:
     """``tracking_of``: the segment of each tracking marker (LandmarkMap.tracking_of); ``present``: the
-    landmark names the profile has (LandmarkMap.present()). Keep one per actor: both fills keep state."""
+    landmark names the profile has (LandmarkMap.present()); ``means``: the landmark map, whose landmarks that are
+    the mean of several markers are then kept, with the rebuild, while some of those are seen (PartialMeans:
+    it needs the frame's markers). Keep one per actor: the fills keep state."""
 
     def __init__(self, rebuild: bool, pose_memory: bool, tracking_of: Sequence[str] = (),
-                 present: Iterable[str] = ()):
+                 present: Iterable[str] = (), means: LandmarkMap | None = None):
         self.rebuilder = SegmentRebuilder(tracking_of) if rebuild else None
         hinge = LegHinge(tracking_of) if rebuild else None
         self.leg_hinge = hinge if hinge is not None and hinge.active else None
         self.memory = PoseMemory(present, tracking_of) if pose_memory else None
+        self.partial = PartialMeans(means) if rebuild and means is not None else None
 
-    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None, time_s: float = np.nan
-             ) -> np.ndarray | None:
+    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None, time_s: float = np.nan,
+             markers: np.ndarray | None = None) -> np.ndarray | None:
         """One frame, in place; the mask of the landmarks filled, or None when no fill is on. ``time_s``: the
-        frame's time (the pose memory finds poses by the toe's velocity too)."""
+        frame's time (the pose memory finds poses by the toe's velocity too); ``markers``: the frame's markers
+        as received (the partial means)."""
         filled = None
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking)
@@ -38,12 +44,15 @@ class LandmarkFills:
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
             recalled = self.memory.fill(landmarks, filled, tracking, time_s)
             filled = recalled if filled is None else filled | recalled
+        if self.partial is not None and markers is not None:  # what is still lost
+            filled |= self.partial.fill(markers, landmarks)
         return filled
 
     def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None,
-                       times_s: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+                       times_s: np.ndarray | None = None, markers: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray | None]:
         """Frames (F, n_landmarks, 3) -> the filled copy and the (F, n_landmarks) mask (None: no fill on);
-        ``times_s``: the frames' times."""
+        ``times_s``: the frames' times; ``markers``: the frames' markers (F, n_labels, 3)."""
         filled = None
         if self.rebuilder is not None:
             if tracking is None and self.rebuilder.n_tracking:  # none given: the tracking markers are lost
@@ -55,4 +64,7 @@ class LandmarkFills:
         if self.memory is not None:
             landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking, times_s)
             filled = recalled if filled is None else filled | recalled
+        if self.partial is not None and markers is not None:
+            landmarks, kept = self.partial.fill_landmarks(markers, landmarks)
+            filled |= kept
         return landmarks, filled

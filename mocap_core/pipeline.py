@@ -19,7 +19,6 @@ from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.localization import Localizer
-from mocap_core.partial_means import PartialMeans
 from mocap_core.profiles import Profile
 
 
@@ -49,8 +48,8 @@ class SkeletonPipeline:
         self.landmark_map = profile.resolve(labels)
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         on = beyond and fill_gaps  # the landmark fills are gap fills
-        self.partial = PartialMeans(self.landmark_map) if on else None
-        self.fills = LandmarkFills(on, on, self.landmark_map.tracking_of, self.landmark_map.present())
+        self.fills = LandmarkFills(on, on, self.landmark_map.tracking_of, self.landmark_map.present(),
+                                   self.landmark_map)
         self.localizer = Localizer(profile.body)
         options = fill_options if fill_options is not None else BEYOND_THESIS if beyond else {}
         self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
@@ -68,10 +67,7 @@ class SkeletonPipeline:
         ``markers``: the frames' markers, from which a landmark that is the mean of several, still lost, is kept
         while some of them are seen (mocap_core.partial_means; with the rebuild)."""
         times = (start + np.arange(len(landmarks))) * self.frame_s
-        landmarks, rebuilt = self.fills.fill_landmarks(landmarks, tracking, times)
-        if self.partial is not None and markers is not None:  # (what the fills before could not)
-            landmarks, kept = self.partial.fill_landmarks(markers, landmarks)
-            rebuilt = kept if rebuilt is None else rebuilt | kept
+        landmarks, rebuilt = self.fills.fill_landmarks(landmarks, tracking, times, markers)
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:

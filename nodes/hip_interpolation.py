@@ -16,7 +16,6 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
 from mocap_core.landmark_fills import LandmarkFills
-from mocap_core.partial_means import PartialMeans
 from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.profiles import LANDMARKS, load_profile
 from mocap_core.segment_rebuild import REBUILD_HELP
@@ -42,7 +41,6 @@ class HipInterpolation(Node):
     def setup(self) -> None:
         self.profile = load_profile(self.params.profile)
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
-        self.partial = None  # (made with the fills)
         self.fills = None  # made when the profile is resolved: they need its tracking markers and landmarks
         if self.params.rebuild:
             warm_up(("rebuild",))  # its kernel loaded before ready, not on the first frame (0.65 s)
@@ -57,8 +55,7 @@ class HipInterpolation(Node):
             self.labels = msg.labels
             # (new ones: what they learned was of the old marker set's landmarks)
             self.fills = LandmarkFills(self.params.rebuild, self.params.pose_memory, self.map.tracking_of,
-                                       self.map.present())
-            self.partial = PartialMeans(self.map) if self.params.rebuild else None
+                                       self.map.present(), self.map)
             if (self.params.rebuild or self.params.pose_memory) and self.map.absent_tracking:
                 self.log.warning("tracking markers %s of profile %s are not in the stream: gaps filled "
                                  "without them", ", ".join(self.map.absent_tracking), self.profile.name)
@@ -68,13 +65,10 @@ class HipInterpolation(Node):
         lm[HIP_INDEX] = hips
         fills_on = self.params.rebuild or self.params.pose_memory  # (both read the tracking markers)
         rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if fills_on else None,
-                                  msg.header.capture_time_s)
-        partial = self.partial.fill(msg.positions, lm) if self.partial is not None else None  # (what is still lost)
+                                  msg.header.capture_time_s, msg.positions)
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:
             flags[rebuilt] = FLAG_INTERPOLATED
-        if partial is not None:
-            flags[partial] = FLAG_INTERPOLATED
         self.ctx.publish("markers/filled", MarkerFrame(header=MarkerFrame.make_header(), labels=list(LANDMARKS),
                                                        positions=lm.astype(np.float32), flags=flags), source=msg)
