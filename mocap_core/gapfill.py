@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from mocap_core import analytic_fill as af
+from mocap_core.blend import BlendState
 from mocap_core.analytic_fill import all_finite
 from mocap_core.body_model import BODY_MODEL_HELP, END_MODEL_HELP, END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
 from mocap_core.ik.constraints import Constraints, load_constraints
@@ -113,10 +114,10 @@ class LimbFiller:
         # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
         # Inertialization at both ends of a gap (issue 9, blend_half_life_s): a joint whose markers are lost
         # goes on where it was heading, then eases into the estimate; one whose markers come back eases into
-        # them. The offset dies out as a critically damped spring (af.blend_transitions). Short gaps, the
+        # them. The offset dies out as a critically damped spring (mocap_core/blend.py). Short gaps, the
         # studio's usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every
         # 0.5 s were 27-29 mm off on average with a jump at loss, 12-14 mm with a half-life of 0.1 s.
-        self.blend = af.BlendState.empty(n, reacquire_step_m, blend_half_life_s, blend_course)
+        self.blend = BlendState.empty(n, reacquire_step_m, blend_half_life_s, blend_course)
         # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
         # ones on their swivel circle; a lost ankle carried by its foot and a lost end by the bone
         # before it. State: the last well-defined bend direction per run (joint, end, frame kind),
@@ -161,7 +162,7 @@ class LimbFiller:
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray,
              time_s: float = float("nan")) -> FillStats:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton).
-        ``time_s``: the frame's capture time, which paces the blend (else af.DEFAULT_FRAME_S a frame)."""
+        ``time_s``: the frame's capture time, which paces the blend (else blend.DEFAULT_FRAME_S a frame)."""
         t0 = time.perf_counter()
         self.blend.advance_clock(time_s)
         out = np.zeros(4)

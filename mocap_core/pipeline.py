@@ -11,7 +11,7 @@ from typing import Iterator
 
 import numpy as np
 
-from mocap_core.analytic_fill import DEFAULT_FRAME_S
+from mocap_core.blend import DEFAULT_FRAME_S
 from mocap_core.gapfill import BEYOND_THESIS, GapFiller
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.kernels import frames_to_quats
@@ -42,7 +42,7 @@ class SkeletonPipeline:
         """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
         to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles
         from the pose memory, swivel, segment carry, the blends at loss and re-acquisition). ``rate_hz``:
-        the take's frame rate, which paces the blends (else analytic_fill.DEFAULT_FRAME_S a frame).
+        the take's frame rate, which paces the blends (else blend.DEFAULT_FRAME_S a frame).
         ``fill_options``: the gap filler's options instead of ``beyond``'s (gapfill.BEYOND_THESIS)."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
         self.landmark_map = profile.resolve(labels)

@@ -63,7 +63,7 @@ FALLBACK_M = 0.1    # no own pose this near (the key's distance): the other leg'
 # moves, and the mean jumps with them. Knee+ankle on the dance set, 0.5 -> 0.2: hidden 0.1 s in every 0.5 s
 # (dance2 left), 20.5 / 21.5 -> 17.9 / 17.8 mm mean, the ankle's largest added move at loss 1.39x -> 0.82x its
 # normal step; hidden 5-15 s, dance1 27.7 / 66.6 -> 28.8 / 66.8, dance2 48.9 / 54.9 -> 47.1 / 53.9, walk1
-# 45.8 / 33.7 -> 43.9 / 33.5 (both before the blend's course weight, analytic_fill.course_weight). 0.1 took
+# 45.8 / 33.7 -> 43.9 / 33.5 (both before the blend's course weight, blend.course_weight). 0.1 took
 # dance1's knee to 30.2 and walk1's ankle to 40.0. Stop 33, 0.2 -> 0.3: with stop 32's velocity search the
 # recall follows a walking knee closely enough that the smoothing's lag (4 frames at 0.2) costs more than its
 # jitter; the sixteen knee and ankle means of the long gaps 560 -> 532 mm (walk1 right's knee 42.8 -> 37.9), and
@@ -80,7 +80,7 @@ SMOOTHING = 0.3
 # follows a steady motion without lag and takes PELVIS_GAIN of a one-frame slip: the changes of its turn are
 # half as large at the 95th percentile (dance1 1.26 -> 0.76 deg, dance2 2.52 -> 1.26, walk1 2.74 -> 1.17), and
 # its axes stay within 0.3 deg of the raw ones (median; 0.7-0.9 at the 95th percentile). Knee+ankle hidden
-# 0.1 s in every 0.5 s on dance1 (the blend at return going on with the output's own step, analytic_fill): the
+# 0.1 s in every 0.5 s on dance1 (the blend at return going on with the output's own step, mocap_core.blend): the
 # largest move the fill adds at return 1.62x / 1.52x the normal step -> 1.47x / 1.38x with the axes tracked,
 # 1.33x / 1.38x with the origin too; at loss 1.46x -> 1.46x. The means within 0.8 mm on every dance-set leg,
 # short gaps and long. Gains of 0.5-0.7 did as well (the axes alone); 0.3 took the knee's loss to 1.64x.

@@ -1,10 +1,11 @@
-"""The blend at both ends of a gap (analytic_fill.blend_transitions, LimbFiller's blend_half_life_s)."""
+"""The blend at both ends of a gap (blend.blend_transitions, LimbFiller's blend_half_life_s)."""
 import math
 
 import numpy as np
 import pytest
 
 from mocap_core import analytic_fill as af
+from mocap_core import blend
 from mocap_core.experiments import gap_run, transition_moves
 from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
 from mocap_core.pipeline import SkeletonPipeline
@@ -24,14 +25,14 @@ def run(rate_hz: float, lost: range, half_life: float = HALF_LIFE, step: float =
         bias=lambda f: BIAS, velocity=VELOCITY, course: bool = True, fill=lambda f: ESTIMATED):
     """One joint moving along a line; in the ``lost`` frames its source is an estimate ``bias(frame)`` off
     the truth, of status ``fill(frame)``. Returns the output and the truth, per frame."""
-    blend = af.BlendState.empty(1, step, half_life, course)
+    state = blend.BlendState.empty(1, step, half_life, course)
     out, truth = [], []
     for f in range(frames):
-        blend.advance_clock(f / rate_hz)
+        state.advance_clock(f / rate_hz)
         true = START + velocity * f / rate_hz
         status = np.array([fill(f) if f in lost else LOCATED], np.int64)
         positions = (true + (bias(f) if f in lost else 0.0)).reshape(1, 3).copy()
-        blend.blend(positions, status, np.array([0]))
+        state.blend(positions, status, np.array([0]))
         out.append(positions[0].copy())
         truth.append(true)
     return np.array(out), np.array(truth)
@@ -48,16 +49,16 @@ def test_a_lost_joint_goes_on_where_it_was_heading_then_eases_into_the_estimate_
     # after the half-life whatever the frame rate; and the output leaves the markers' course (here the
     # line itself) for that by the weight c^2 / (c^2 + s^2): the line never bent (the acceleration's floor),
     # and no markers came back yet to tell how far the estimate misses (the prior)
-    omega = af.BLEND_X / HALF_LIFE
+    omega = blend.BLEND_X / HALF_LIFE
     for f in range(loss, len(out)):
         t = (f - loss) / rate_hz
-        stray = af.COURSE_K * 0.5 * af.ACCEL_FLOOR * t * t
-        weight = stray ** 2 / (stray ** 2 + af.FILL_SD_PRIOR ** 2)
-        expected = BIAS * (1 - (1 + omega * t) * math.exp(-omega * t)) * (1.0 if weight >= af.EASED else weight)
+        stray = blend.COURSE_K * 0.5 * blend.ACCEL_FLOOR * t * t
+        weight = stray ** 2 / (stray ** 2 + blend.FILL_SD_PRIOR ** 2)
+        expected = BIAS * (1 - (1 + omega * t) * math.exp(-omega * t)) * (1.0 if weight >= blend.EASED else weight)
         np.testing.assert_allclose(error[f], expected, atol=1e-12)
     half = loss + int(round(HALF_LIFE * rate_hz))
     assert error[half, 1] < BIAS[1] / 2  # on its course for longer than the spring alone would be
-    assert weight >= af.EASED  # and then on the estimate, with the spring alone
+    assert weight >= blend.EASED  # and then on the estimate, with the spring alone
     # nothing twitches: the output's per-frame move exceeds the line's by at most 1.5x what the spring
     # alone adds at its fastest (the weight rises as t^4 while the spring's offset grows)
     extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
@@ -71,7 +72,7 @@ def test_without_the_course_the_spring_alone_eases_into_the_estimate_known_answe
     loss = int(0.1 * rate_hz)
     out, truth = run(rate_hz, range(loss, 10_000), course=False)
     error = out - truth
-    omega = af.BLEND_X / HALF_LIFE
+    omega = blend.BLEND_X / HALF_LIFE
     for f in range(loss, len(out)):
         t = (f - loss) / rate_hz
         np.testing.assert_allclose(error[f], BIAS * (1 - (1 + omega * t) * math.exp(-omega * t)), atol=1e-12)
@@ -106,7 +107,7 @@ def test_a_step_caps_how_fast_the_offset_closes_or_half_the_joints_own_step(spee
     bias = lambda f: np.array([0.0, 0.3, 0.0])  # noqa: E731  (far enough for the cap to bind)
     out, truth = run(rate_hz, range(10, 10_000), step=step, velocity=velocity, bias=bias, frames=200)
     extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
-    cap = max(step, af.PACE_SHARE * speed / rate_hz)
+    cap = max(step, blend.PACE_SHARE * speed / rate_hz)
     assert extra.max() <= cap + 1e-12
     assert extra.max() > 0.99 * cap  # (the cap binds)
     spring, _ = run(rate_hz, range(10, 10_000), velocity=velocity, bias=bias, frames=200)
@@ -124,7 +125,7 @@ def test_an_estimate_that_jumps_to_another_source_mid_gap_is_met_smoothly_known_
     np.testing.assert_allclose(steps[jump_at - 1], steps[jump_at - 2], atol=1e-12)  # goes on as it went
     extra = np.linalg.norm(steps - np.diff(truth, axis=0), axis=1)
     # the spring's pace (its offset: the jump and what was left of the loss's), no jump
-    assert extra.max() < np.linalg.norm(jump + BIAS) * (af.BLEND_X / HALF_LIFE) / math.e / rate_hz
+    assert extra.max() < np.linalg.norm(jump + BIAS) * (blend.BLEND_X / HALF_LIFE) / math.e / rate_hz
     assert np.linalg.norm(out[-1] - truth[-1] - BIAS - jump) < 1e-4                   # then the new source
 
 
@@ -139,7 +140,7 @@ def test_a_fill_handed_to_another_mid_gap_is_met_smoothly_known_answer():
                      fill=lambda f: HELD if f < hand_over else ESTIMATED)
     extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
     assert extra[:hand_over - 1].max() < 0.1 * np.linalg.norm(jump)  # (the loss's own ease, long over)
-    assert extra[hand_over - 1:].max() < np.linalg.norm(jump) * (af.BLEND_X / HALF_LIFE) / math.e / rate_hz
+    assert extra[hand_over - 1:].max() < np.linalg.norm(jump) * (blend.BLEND_X / HALF_LIFE) / math.e / rate_hz
     assert np.linalg.norm(out[-1] - truth[-1] - BIAS - jump) < 1e-4  # then the new fill
     same, _ = run(rate_hz, range(10, 10_000), bias=bias, frames=400)  # one fill throughout: its own motion
     assert np.linalg.norm(np.diff(same, axis=0)[hand_over - 1] - np.diff(truth, axis=0)[hand_over - 1]) > 0.05
@@ -165,7 +166,7 @@ def test_an_estimate_given_up_for_a_hold_goes_on_along_its_course_known_answer()
     back: 31 -> 29 mm over its long test gap)."""
     rate_hz, hold_at = 120.0, 100
     out, truth = _estimated_then_held(rate_hz, hold_at)
-    omega = af.BLEND_X / HALF_LIFE
+    omega = blend.BLEND_X / HALF_LIFE
     step = VELOCITY / rate_hz
     def spring(n):  # the hold plus the spring's offset (the hand-over's jump, one step), eased from that frame
         t = (n + 1) / rate_hz
@@ -174,9 +175,9 @@ def test_an_estimate_given_up_for_a_hold_goes_on_along_its_course_known_answer()
         n = f - hold_at
         course = spring(0) + step * n  # from where the output was, on at the estimate's last step
         t = n / rate_hz
-        stray = af.COURSE_K * 0.5 * af.ACCEL_FLOOR * t * t
-        weight = stray ** 2 / (stray ** 2 + af.FILL_SD_PRIOR ** 2)
-        weight = 1.0 if weight >= af.EASED else weight
+        stray = blend.COURSE_K * 0.5 * blend.ACCEL_FLOOR * t * t
+        weight = stray ** 2 / (stray ** 2 + blend.FILL_SD_PRIOR ** 2)
+        weight = 1.0 if weight >= blend.EASED else weight
         np.testing.assert_allclose(out[f], course + weight * (spring(n) - course), atol=1e-12)
     spring_alone, _ = _estimated_then_held(rate_hz, hold_at, course=False)
     ahead = hold_at + 4
@@ -263,14 +264,14 @@ def test_an_estimate_faster_than_the_jump_threshold_on_a_curve_is_followed_not_f
     keep the last step under the threshold; the curve then left it by more, every next frame was met as a jump,
     and the output stood still (the Vicon take's right toe, 4 frames at frame 490, 400 mm behind)."""
     rate_hz, radius, speed = 120.0, 0.6, 12.6
-    blend = af.BlendState.empty(1, 0.01, HALF_LIFE, True)
+    state = blend.BlendState.empty(1, 0.01, HALF_LIFE, True)
     out, source = [], []
     for f in range(60):
-        blend.advance_clock(f / rate_hz)
+        state.advance_clock(f / rate_hz)
         angle = speed / radius * f / rate_hz
         p = START + radius * np.array([np.cos(angle), np.sin(angle), 0.0])
         positions = p.reshape(1, 3).copy()
-        blend.blend(positions, np.array([ESTIMATED if f >= 5 else LOCATED], np.int64), np.array([0]))
+        state.blend(positions, np.array([ESTIMATED if f >= 5 else LOCATED], np.int64), np.array([0]))
         out.append(positions[0].copy())
         source.append(p)
     steps = np.linalg.norm(np.diff(out, axis=0), axis=1)
@@ -342,16 +343,16 @@ def _eased_loss(bias_m: float) -> float:
     """A joint on a circle (it accelerates), lost for 10 frames in every 40 at 100 Hz with a fill ``bias_m``
     off; how far the output has gone from the markers' course towards the fill 50 ms into the last gap."""
     rate_hz = 100.0
-    blend = af.BlendState.empty(1, 0.0, HALF_LIFE)
+    state = blend.BlendState.empty(1, 0.0, HALF_LIFE)
     for f in range(400):
-        blend.advance_clock(f / rate_hz)
+        state.advance_clock(f / rate_hz)
         angle = f / rate_hz
         true = START + 0.3 * np.array([math.cos(angle), math.sin(angle), 0.0])
         lost = f >= 40 and f % 40 < 10
         status = np.array([ESTIMATED if lost else LOCATED], np.int64)
         positions = (true + (np.array([0.0, 0.0, bias_m]) if lost else 0.0)).reshape(1, 3).copy()
-        blend.blend(positions, status, np.array([0]))
-    return af.course_weight(0.05, blend.trust[0])
+        state.blend(positions, status, np.array([0]))
+    return blend.course_weight(0.05, state.trust[0])
 
 
 def test_a_fill_that_missed_where_the_markers_came_back_is_trusted_later_after_a_loss():
@@ -429,10 +430,10 @@ def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: in
     wrist's from ``wrist_lost_at``, its estimate where it is; from ``lost_at`` on the wrist goes ``stretch``
     metres a frame further out from the shoulder (skin sliding). Returns per frame the blend's course for the
     elbow, whether one runs, and the truth (frames x 3 joints x 3)."""
-    blend = af.BlendState.empty(3, 0.01, HALF_LIFE, True)
+    state = blend.BlendState.empty(3, 0.01, HALF_LIFE, True)
     courses, running, truths = [], [], []
     for f in range(frames):
-        blend.advance_clock(f / rate_hz)
+        state.advance_clock(f / rate_hz)
         angle = 2 * math.pi * SWING_HZ * f / rate_hz
         elbow = START + 0.3 * np.array([math.cos(angle), math.sin(angle), 0.0])
         wrist = elbow + 0.25 * np.array([math.cos(angle + 0.6), math.sin(angle + 0.6), 0.0])
@@ -445,9 +446,9 @@ def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: in
             status[1] = ESTIMATED
         if f >= wrist_lost_at:
             status[2] = ESTIMATED
-        blend.blend(positions, status, np.arange(3))
-        courses.append(blend.course[1].copy())
-        running.append(blend.since_loss[1] < math.inf)
+        state.blend(positions, status, np.arange(3))
+        courses.append(state.course[1].copy())
+        running.append(state.since_loss[1] < math.inf)
         truths.append(truth)
     return np.array(courses), np.array(running), np.array(truths)
 
@@ -510,18 +511,18 @@ def test_a_missing_frame_leaves_no_stale_step_behind():
     source. (Before stop 31 the position from before the missing frame was kept: the next two frames' samples
     were a two-frame step and a one-frame step taken for accelerations, 480 and 240 m/s² at 120 Hz.)"""
     rate_hz, velocity = 120.0, np.array([2.0, 0.0, 0.0])
-    blend = af.BlendState.empty(1, 0.0, HALF_LIFE)
+    state = blend.BlendState.empty(1, 0.0, HALF_LIFE)
     for f in range(30):
-        blend.advance_clock(f / rate_hz)
+        state.advance_clock(f / rate_hz)
         missing = f == 15
         positions = (START + velocity * f / rate_hz).reshape(1, 3)
         positions = np.full((1, 3), np.nan) if missing else positions.copy()
         status = np.array([int(Status.MISSING) if missing else LOCATED], np.int64)
-        blend.blend(positions, status, np.array([0]))
+        state.blend(positions, status, np.array([0]))
         if not missing:
             np.testing.assert_allclose(positions[0], START + velocity * f / rate_hz, atol=1e-12)
-    acc = blend.trust[0, af.ACC_SUM] / blend.trust[0, af.ACC_N]
-    assert blend.trust[0, af.ACC_N] >= 20
+    acc = state.trust[0, blend.ACC_SUM] / state.trust[0, blend.ACC_N]
+    assert state.trust[0, blend.ACC_N] >= 20
     assert acc < 1e-6, acc
 
 
@@ -537,7 +538,7 @@ def test_the_output_stays_within_reach_of_a_fill_that_stands_still():
                      fill=lambda f: HELD)
     source = truth + np.array([frozen(f) if loss <= f < back else np.zeros(3) for f in range(200)])
     apart = np.linalg.norm(out - source, axis=1)
-    assert apart[loss:back].max() == pytest.approx(af.MAX_APART_M)  # it binds, and holds
+    assert apart[loss:back].max() == pytest.approx(blend.MAX_APART_M)  # it binds, and holds
     assert apart[back:].max() <= apart[back] + 1e-9
     assert np.diff(apart[back:back + 20]).max() < 0
 
@@ -559,14 +560,14 @@ def test_a_bone_frame_whose_neighbour_changes_source_turns_on_smoothly():
     from then on. Its jump of 60 degrees is eased like its own change of source would be."""
     from mocap_core.ik.kernels import axis_angle
 
-    blend = af.BlendState.empty(2, 0.01, HALF_LIFE, True)
+    state = blend.BlendState.empty(2, 0.01, HALF_LIFE, True)
     jump = axis_angle(np.array([0.0, 1.0, 0.0]), np.radians(60))
     out = []
     for f in range(80):
-        blend.advance_clock(f / 120.0)
+        state.advance_clock(f / 120.0)
         frames = np.stack([np.eye(3), jump if f >= 10 else np.eye(3)])
         status = np.array([ESTIMATED if f >= 10 else LOCATED, LOCATED], np.int64)
-        blend.blend(np.zeros((2, 3)), status, np.array([0, 1]), frames)
+        state.blend(np.zeros((2, 3)), status, np.array([0, 1]), frames)
         out.append(frames[1].copy())
     turns = [np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))) for a, b in zip(out, out[1:])]
     assert max(turns) < 6.0 and np.degrees(np.arccos(np.clip((np.trace(out[-1].T @ jump) - 1) / 2, -1, 1))) < 2.0
@@ -580,16 +581,16 @@ def test_a_bone_frame_that_changes_source_turns_on_smoothly_known_answer():
     from mocap_core.ik.kernels import axis_angle
 
     rate_hz, frames_n = 120.0, 140
-    blend = af.BlendState.empty(1, 0.01, HALF_LIFE, True)
+    state = blend.BlendState.empty(1, 0.01, HALF_LIFE, True)
     off = axis_angle(np.array([1.0, 0.0, 0.0]), np.pi / 2)
     out = []
     for f in range(frames_n):
-        blend.advance_clock(f / rate_hz)
+        state.advance_clock(f / rate_hz)
         filled = 20 <= f < 80
         source = axis_angle(np.array([0.0, 0.0, 1.0]), np.radians(f))
         frames = (off @ source if filled else source).reshape(1, 3, 3).copy()
         positions = (START + VELOCITY * f / rate_hz).reshape(1, 3).copy()
-        blend.blend(positions, np.array([ESTIMATED if filled else LOCATED], np.int64), np.array([0]), frames)
+        state.blend(positions, np.array([ESTIMATED if filled else LOCATED], np.int64), np.array([0]), frames)
         out.append(frames[0].copy())
         if f in (79, frames_n - 1):
             want = off @ source if f == 79 else source

@@ -1,0 +1,400 @@
+"""The blend: a joint that changes source (its markers lost or back, a fill handed to another) goes on where it
+was heading, and the offset to the new source dies out as a critically damped spring (inertialization, as game
+engines do); after a loss it leaves its markers' course for the fill only as that course grows less trustworthy
+than the fill has been. Bone frames are blended the same way. Numba kernels; gapfill.LimbFiller keeps a
+BlendState per limb and calls BlendState.blend after the fills (mocap_core.analytic_fill, the IK solvers).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from mocap_core.analytic_fill import ESTIMATED, HELD, LOCATED, MISSING, all_finite, nearest_on_circle
+from mocap_core.ik.kernels import axis_angle, mm, rotation_vector, vnorm
+
+# A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.
+BLEND_X = 1.6783469900166612
+# Faster than this, an estimate has jumped to another source (no joint moves so fast: the karate kata's strikes
+# take the wrist to 4-7 m/s); the Vicon take's held left wrist jumped 147 and 286 mm in a frame (18-34 m/s).
+SOURCE_JUMP_M_S = 10.0
+# A source seen again within this many frames (a flickering marker) gets its step from its last sighting.
+FLICKER_FRAMES = 5
+# Seconds between frames when the caller gives no capture times (the blend's spring needs them).
+DEFAULT_FRAME_S = 0.01
+# After a loss, the output leaves the markers' course for the fill only as fast as the course can be trusted
+# less than the fill (the dead blending of game engines, weighted): by w = c^2 / (c^2 + s^2), where
+# c = COURSE_K * |a| t^2 / 2 is how far the course may have strayed t seconds on (|a| the joint's mean
+# acceleration while located, at least ACCEL_FLOOR) and s the fill's RMS miss where the markers came back
+# (FILL_SD_PRIOR counting as one such), the spring's offset included. Both are learned per joint: on
+# dance2's short gaps the pose memory's knee misses by 42 mm RMS and stays on its course longer, the
+# elbows by 21-24 mm, the sprint's rebuilt elbow by 10 mm (its arm accelerating at 13 m/s^2).
+# The spring's offset alone gave the course up at once, at the fill's own velocity: on dance2's knee and
+# ankle (0.1 s hidden in every 0.5 s) a fill that moved 30 mm a frame where the markers moved 5.
+# Short gaps, the studio options (prototype): knee+ankle on dance2 left 17.9 / 17.8 mm mean -> 11.1 /
+# 10.4, right 15.6 / 15.7 -> 10.0 / 10.7, dance1 left 13.5 / 13.5 -> 11.3 / 8.6; dance2's elbows 9.1 /
+# 10.4 -> 9.5 / 9.6; the sprint's elbow 4.0 -> 5.6 (its arms swing hardest; the spring's offset alone
+# keeps a rebuild's steady bias better). COURSE_K 1: dance2's elbows 13 mm, the sprint 12; 10: the knees
+# 13-15 mm. Without the weight (a fixed ease over 0.2 s) the sprint was 31 mm; the miss of the raw fill
+# instead of the output's, the sprint 6.2; the course's own misses at returns learned too, 8.3.
+COURSE_K = 3.0
+ACCEL_FLOOR = 1.0       # m/s^2
+FILL_SD_PRIOR = 0.01    # metres
+# reacquire_step_m caps how far the blend moves the output off its source in a frame; a source moving over
+# four times that may be left or met at a quarter of its own step. A kicking foot lost at 10 mm a frame, its
+# fill running on at 60, fell 0.75 m behind at the 10 mm cap, and then took 0.65 s to meet its markers (stop
+# 29: the Vicon take's right foot at frame 534). A half: the Vicon take's moves of filled joints over 1.5x
+# their normal went 24 -> 101 and dance1's ankle came back at 1.56x its normal step on short gaps; a
+# quarter: 68, and 1.47x as before.
+PACE_SHARE = 0.25
+EASED = 0.999           # the weight at which the fill is taken whole
+# While a fill stands in for the markers, the output stays within this of it. The markers' course runs on
+# straight at their last step, and the step cap lets the output leave it at 10 mm a frame: a hand lost in a
+# strike at 65 mm a frame (karate, a whole arm hidden 1 s in every 2 s) flew 1.2 m off its held fill in 0.2 s,
+# and the offsets that came back with it, closed at the same cap, piled up gap after gap (2.0 m off on average,
+# 7.1 m at worst; dance2's hand 1.8 / 4.6 m). At 0.5 m: 0.23 / 0.84 m and 0.43 / 1.06 m, and not one figure of
+# the short-gap, long-gap or real-gap tables moved (it never binds there); at 0.3 m the Vicon take's kicking
+# ankle, whose held fill is the one that is wrong, went 117 -> 214 mm at worst.
+MAX_APART_M = 0.5
+# BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
+# where the markers came back and how many; frames located in a row.
+ACC_SUM, ACC_N, MISS_SQ, MISS_N, LOCATED_RUN = range(5)
+
+
+@dataclass
+class BlendState:
+    """The blend of a limb: its settings (``step``: reacquire_step_m; ``omega``: the spring's, from
+    blend_half_life_s), what blend_transitions keeps per joint between frames, and the frame clock."""
+    last_out: np.ndarray      # (n, 3) the last output
+    out_step: np.ndarray      # (n, 3) and its last step
+    last_raw: np.ndarray      # (n, 3) the source's last position, before the offset
+    raw_vel: np.ndarray       # (n, 3) and its last step
+    seen_raw: np.ndarray      # (n, 2, 3) where each kind of source (0 markers, 1 a fill) was last seen
+    seen_age: np.ndarray      # (n, 2) and how many frames ago
+    last_status: np.ndarray   # (n,)
+    has_last: np.ndarray      # (1,) bool
+    offset: np.ndarray        # (n, 3) the spring's offset
+    offset_vel: np.ndarray    # (n, 3) and its velocity
+    course: np.ndarray        # (n, 3) where the markers' course leads, since they were lost
+    course_step: np.ndarray   # (n, 3) and its step
+    since_loss: np.ndarray    # (n,) seconds since the markers were lost (inf: no loss being eased)
+    eased: np.ndarray         # (n,) and how far it has gone from that course towards the fill (0-1)
+    trust: np.ndarray         # (n, 5) what course_weight learns from (columns ACC_SUM ... LOCATED_RUN)
+    prev_raw: np.ndarray      # (n, 3) the source's position a frame before last_raw
+    prev_vel: np.ndarray      # (n, 3) and its step then
+    course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
+    last_frame: np.ndarray    # (n, 3, 3) the last output bone frame (NaN: none)
+    turn_axis: np.ndarray     # (n, 3) the frame's offset where its source changed: a turn about this axis
+    turn: np.ndarray          # (n, 3) by this angle (radians, column 0) times the spring's share (1), and its
+    #                           velocity (2)
+    step: float = 0.0
+    omega: float = 0.0
+    course_on: bool = True    # blend_course: after a loss, leave the markers' course as course_weight says
+    frame_s: float = DEFAULT_FRAME_S
+    last_time_s: float = float("nan")
+
+    @classmethod
+    def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0, course: bool = True) -> "BlendState":
+        return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
+                   np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
+                   np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
+                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan),
+                   np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
+                   BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
+
+    @property
+    def on(self) -> bool:
+        return self.step > 0 or self.omega > 0
+
+    def advance_clock(self, time_s: float) -> None:
+        """The time since the last frame; a missing, repeated or backward stamp (a looping file, a
+        restarted QTM) or one over a second keeps the last good interval."""
+        step = time_s - self.last_time_s
+        if 0 < step <= 1.0:
+            self.frame_s = step
+        self.last_time_s = time_s
+
+    def blend(self, positions, status, idx, frames=None) -> None:
+        """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone
+        frames, are blended too where given (blend_frames, with the spring's half-life)."""
+        if frames is not None and self.omega > 0:  # (before blend_transitions, which moves last_status on)
+            blend_frames(frames, status, idx, self.last_status, self.has_last, self.last_frame, self.turn_axis,
+                         self.turn, self.omega, self.frame_s)
+        blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
+                          self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
+                          self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
+                          self.frame_s, self.course_on, self.prev_raw, self.prev_vel, self.course_len)
+
+
+@njit(cache=True)
+def spring_step(x, v, omega, dt, decay):
+    """One step of a critically damped spring towards 0 from ``x`` at velocity ``v`` (Holden's exact form for any
+    ``dt``; ``decay`` = exp(-omega dt)): the new (x, v). For a number or a vector."""
+    spring = v + omega * x
+    return decay * (x + spring * dt), decay * (v - spring * omega * dt)
+
+
+@njit(cache=True)
+def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_axis, turn, omega, dt):
+    """A joint's bone frame that changes source (its or a neighbour's markers lost or back, a fill handed to
+    another) goes on from the frame it had, and the turn between the two dies out as a critically damped spring
+    (the positions' blend, for the bone frames a rig streams), in place. The Vicon take's left wrist, handed
+    between its sliding markers and the swivel's fill, turned up to 174 degrees in a frame there."""
+    decay = math.exp(-omega * dt)
+    n = idx.shape[0]
+    for k in range(n):
+        j = idx[k]
+        frame = frames[j].copy()
+        s, was = status[j], last_status[k]
+        if not all_finite(frame):
+            last_frame[k] = np.nan
+            turn[k, 1] = 0.0
+            continue
+        # a frame is built from its joint and the joints either side (a bone's frame runs to the next joint, the
+        # hand's is the wrist's): a change of source of any of them is one of the frame's
+        changed = s != was and s != MISSING and was != MISSING
+        for m in (k - 1, k + 1):
+            if 0 <= m < n and status[idx[m]] != last_status[m]:
+                changed = True
+        if has_last[0] and changed and all_finite(last_frame[k]):
+            offset = rotation_vector(mm(last_frame[k], frame.T.copy()))  # the old frame, less the new one
+            angle = vnorm(offset)
+            if angle > 1e-12:
+                turn_axis[k] = offset / angle
+                turn[k, 0], turn[k, 1], turn[k, 2] = angle, 1.0, 0.0
+            else:
+                turn[k, 1] = 0.0
+        elif turn[k, 1] != 0.0:
+            turn[k, 1], turn[k, 2] = spring_step(turn[k, 1], turn[k, 2], omega, dt, decay)
+            if abs(turn[k, 1]) < 1e-4:
+                turn[k, 1] = 0.0
+        if turn[k, 1] != 0.0:
+            frame = mm(axis_angle(turn_axis[k], turn[k, 0] * turn[k, 1]), frame)
+            frames[j] = frame
+        last_frame[k] = frame
+
+
+@njit(cache=True)
+def _take_step(velocity, step, last_step, limit):
+    """A source's step becomes its velocity unless it is faster than any joint moves and as far off its own last
+    step (a jump, or two fills of one kind that are not one source), in place. (Faster alone is not enough: a
+    kicking toe filled at 105 mm a frame, 12.6 m/s, kept a velocity of 83 mm a frame from before; its curving
+    course then left that by over the jump's threshold, every next frame was met as a jump, and the output stood
+    still for 4 frames, 400 mm behind: the Vicon take's right toe at frame 490.)"""
+    if vnorm(step) <= limit or vnorm(step - last_step) <= limit:
+        velocity[:] = step
+
+
+@njit(cache=True)
+def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
+                  course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on, prev_raw, prev_vel,
+                  course_len, neighbours):
+    """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
+    a loss, eased from the markers' course into that (see blend_transitions). ``neighbours``: the joints
+    before and after it in the chain, where both are located (else NaN)."""
+    kind = 0 if s == LOCATED else 1
+    raw = p.copy()
+    heading = last_raw[k] + raw_vel[k]  # where the source was heading
+    before_raw = last_raw[k].copy()  # (the next frame's prev_raw / prev_vel, for its spike test)
+    before_step = raw_vel[k].copy()  # (also the markers' last step, at a loss; the estimate's, given up)
+    lost = s != LOCATED and was == LOCATED
+    # an estimate given up for a hold, which knows nothing of where the joint went, is met like a loss: the
+    # output goes on along the estimate's course (stop 29: the Vicon take's kicking right knee, its shank's wand
+    # lost too, was 215 mm off after four held frames, then eased back from 260 mm); a course running goes on
+    gave_up = s == HELD and was == ESTIMATED and since_loss[k] == math.inf
+    found_or_lost = (s == LOCATED) != (was == LOCATED)
+    jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
+    # a fill that stepped out for one frame, under the jump's threshold, and is back where it was heading
+    # before that: not a jump, and the output goes on at the step it had before the spike (stop 29: the Vicon
+    # take's left elbow stepped 82 mm out at frame 172 and back; met as a jump, the output went on at the
+    # spike's step, 150 mm off for 25 frames)
+    spike = jumped and s == was and vnorm(raw - (prev_raw[k] + 2.0 * prev_vel[k])) <= SOURCE_JUMP_M_S * dt
+    jumped = jumped and not spike
+    # handed from one fill to another (estimated, held) without such a jump: the new fill's jump is taken into
+    # the offset too (the Vicon take's right wrist, handed from held to estimated at frame 979, moved 73 mm in
+    # that frame, 2.11x its normal step; 0.31x with it). A course goes on through a hold; an estimate back
+    # from one ends it, and the output goes on from itself at its own step into the estimate, as into
+    # returning markers (the Vicon take's left elbow stayed on a stale course for 0.3 s: 107 -> 106 mm)
+    handed = s != LOCATED and was != LOCATED and was != MISSING and s != was and not jumped
+    spring_moved = 0.0
+    limit = step  # how far the blend may move the output off its source this frame
+    trust[k, LOCATED_RUN] = trust[k, LOCATED_RUN] + 1 if s == LOCATED else 0
+    if trust[k, LOCATED_RUN] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two markers' steps
+        trust[k, ACC_SUM] += vnorm(raw - heading) / (dt * dt)  # |acceleration|
+        trust[k, ACC_N] += 1
+    if s == LOCATED and was != LOCATED and was != MISSING:  # how far the output's course missed the markers
+        miss = vnorm(raw - (heading + offset[k]))
+        trust[k, MISS_SQ] += miss * miss
+        trust[k, MISS_N] += 1
+    back = handed and was == HELD and since_loss[k] < math.inf  # an estimate back from a hold, on a course
+    if spike:  # (ending a course, as a jump does)
+        offset[k] = last_out[k] + prev_vel[k] - raw
+        offset_vel[k] = 0.0
+        since_loss[k] = math.inf
+        raw_vel[k] = (raw - prev_raw[k]) * 0.5
+    if handed and not back:
+        offset[k] -= raw - heading
+        offset_vel[k] = 0.0
+    if was != MISSING and (found_or_lost or jumped or back):
+        if since_loss[k] < math.inf:
+            # the output left the spring's course for the markers': go on from it, at its own last step (the
+            # fill's can be a recall's jitter: on dance1's knee 31 mm a frame where the leg moved 10)
+            offset[k] = last_out[k] + out_step[k] - heading
+            since_loss[k] = math.inf
+        offset[k] -= raw - heading
+        offset_vel[k] = 0.0  # a new offset, eased from rest
+        since = seen_age[k, kind]  # frames since this kind of source was last seen
+        if found_or_lost and since <= FLICKER_FRAMES:
+            _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
+        elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
+            raw_vel[k] = 0.0  # each taken into the offset (stop 28: the Vicon take's kicking knee, 0.46 m in 5 frames)
+    else:
+        if was != MISSING and not handed and not spike:  # (a hand-over's jump is not the source's step)
+            _take_step(raw_vel[k], raw - last_raw[k], last_raw[k] - prev_raw[k], SOURCE_JUMP_M_S * dt)
+        limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
+        before = offset[k].copy()
+        offset[k], offset_vel[k] = spring_step(before, offset_vel[k], omega, dt, decay)
+        moved = vnorm(offset[k] - before)
+        if step > 0 and moved > limit:
+            offset[k] = before + (offset[k] - before) * (limit / moved)
+        spring_moved = min(moved, limit)
+    last_raw[k] = raw
+    prev_raw[k] = before_raw
+    prev_vel[k] = before_step
+    seen_raw[k, kind] = raw
+    seen_age[k, kind] = 0
+    p += offset[k]
+    if (lost or gave_up) and course_on and trust[k, ACC_N] > 0:
+        course[k], course_step[k], since_loss[k], eased[k] = p, before_step, 0.0, 0.0
+        course_len[k, 0] = vnorm(p - neighbours[0])  # (NaN unless both are located)
+        course_len[k, 1] = vnorm(neighbours[1] - p)
+    elif since_loss[k] < math.inf:
+        since_loss[k] += dt
+        course[k] += course_step[k]
+        # a lone joint's course keeps its distances to its located neighbours, turning with them (an elbow swings
+        # about the shoulder; its markers' straight course flies off the arm). Once one is lost it goes on
+        # straight from where it is. Stop 30, short gaps: dance2's elbows 9.5 / 9.6 -> 7.3 / 7.1 mm. Neighbours out
+        # of reach of those distances (skin that slid) leave a circle shrunk to a point on their line, which is not
+        # where the joint went: the course is pulled towards it by at most the step cap a frame (stop 35: the Vicon
+        # take's right upper arm stretched 233 -> 280 mm in 8 frames; lost for two, its shoulder's course jumped
+        # 36 mm onto that line, and its markers came back at 1.75x its own pace; 1.1x now)
+        if all_finite(course_len[k]) and all_finite(neighbours):
+            on = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0], course_len[k, 1])
+            pull = vnorm(on - course[k])
+            if vnorm(neighbours[1] - neighbours[0]) > course_len[k, 0] + course_len[k, 1] and pull > limit:
+                on = course[k] + (on - course[k]) * (limit / pull)
+            course[k] = on
+        else:
+            course_len[k] = np.nan
+        w = course_weight(since_loss[k], trust[k])
+        w = 1.0 if w >= EASED else w
+        apart = vnorm(p - course[k])
+        if step > 0 and (w - eased[k]) * apart > limit - spring_moved:  # one cap on the two together
+            w = eased[k] + max(limit - spring_moved, 0.0) / apart
+        eased[k] = min(w, 1.0)
+        p[:] = course[k] + eased[k] * (p - course[k])
+        if eased[k] == 1.0:
+            since_loss[k] = math.inf
+    # a fill further off than that where it takes over is met as ever; from there on the output only may not
+    # drift further from it (clamping the frame it took over moved a karate ankle 84 mm, 2.5x its normal step)
+    if s != LOCATED and was != LOCATED and was != MISSING and not (gave_up or jumped or handed or spike):
+        apart = vnorm(p - raw)
+        reach = max(MAX_APART_M, vnorm(last_out[k] - before_raw))
+        if apart > reach:  # (the course and the offset go on from there)
+            p[:] = raw + (p - raw) * (reach / apart)
+            offset[k] = p - raw
+            offset_vel[k] = 0.0
+            if since_loss[k] < math.inf:
+                course[k] = p
+
+
+@njit(cache=True)
+def course_weight(t, trust):
+    """How far the output has gone from the markers' course towards the fill, ``t`` seconds after a loss
+    (``trust``: a joint's row of BlendState.trust)."""
+    stray = COURSE_K * 0.5 * max(trust[ACC_SUM] / trust[ACC_N], ACCEL_FLOOR) * t * t
+    fill_var = (FILL_SD_PRIOR * FILL_SD_PRIOR + trust[MISS_SQ]) / (1.0 + trust[MISS_N])
+    return stray * stray / (stray * stray + fill_var)
+
+
+@njit(cache=True)
+def _linear_return(p, s, was, last, offset, step):
+    """reacquire_step_m alone: returning markers are met from where the estimate ``last`` was, the gap
+    closed by at most ``step`` a frame; a joint that is not located has no offset."""
+    if s == LOCATED and (was == ESTIMATED or was == HELD) and all_finite(last):
+        offset[:] = last - p
+    if s != LOCATED:
+        offset[:] = 0.0
+    size = vnorm(offset)
+    if size > 0:
+        offset *= min(1.0, max(0.0, (size - step) / size))
+        p += offset
+
+
+@njit(cache=True)
+def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
+                      has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
+                      course_on, prev_raw, prev_vel, course_len):
+    """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
+
+    With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
+    had it and close the gap by at most ``step`` metres a frame (a rate-limited decaying offset).
+    With ``omega`` > 0 (blend_half_life_s): the output is the source (markers, or a fill's estimate) plus an
+    offset. Where the markers are lost or come back, the offset takes in the jump: the new source less where the
+    old one was heading (its last position plus its own last step), so the output goes on as it went. The offset
+    then dies out as a critically damped spring (Holden's, exact for any ``dt``), by at most ``step`` a frame
+    when that is set (or PACE_SHARE of the source's own step, if more). At loss the offset is the truth the
+    estimate has not got: over a short gap it keeps the joint near its markers' last course. After a loss the
+    output also stays on that course (the markers' last step, on and on), leaving it for the fill as
+    course_weight says, which learns from the joint how fast its markers turn and how far its fill missed them
+    where they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
+    stop 23). Markers that come back while the output is still leaving that course are met from the output as it
+    went (its own last step), not as the fill went. An estimate that leaves its course faster than
+    SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way; one handed
+    between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
+    then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
+    hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones
+    keeps its distances to them, on their circle (stop 30); out of their reach, it is pulled towards their line
+    by no more than the step cap a frame (stop 35). While a fill stands in, the output stays within MAX_APART_M
+    of it (stop 31). A flickering marker swings the offset back and forth by the two sources' difference:
+    nothing builds up.
+    State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
+    ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
+    (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
+    markers' course after a loss and how far the output has left it; ``course_len``, a lone joint's distances to
+    its neighbours where the course began."""
+    n = idx.shape[0]
+    decay = math.exp(-omega * dt)
+    neighbours = np.empty((2, 3))
+    for k in range(n):
+        j = idx[k]
+        s = status[j]
+        seen_age[k, 0] += 1
+        seen_age[k, 1] += 1
+        if s == MISSING or not all_finite(positions[j]) or (omega == 0 and not has_last[0]):
+            offset[k] = 0.0
+            offset_vel[k] = 0.0
+            raw_vel[k] = 0.0
+            since_loss[k] = math.inf
+            # nothing to measure the next steps from (the source's acceleration, the spike test): the position
+            # from before this frame, kept, made the next two frames' samples a two-frame and a one-frame step
+            last_raw[k] = np.nan
+            trust[k, LOCATED_RUN] = 0
+        elif omega > 0:
+            was = last_status[k] if has_last[0] else MISSING  # the first frame comes from nothing
+            neighbours[:] = np.nan
+            if 0 < k < n - 1 and status[idx[k - 1]] == LOCATED and status[idx[k + 1]] == LOCATED:
+                neighbours[0] = positions[idx[k - 1]]
+                neighbours[1] = positions[idx[k + 1]]
+            _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
+                          offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on,
+                          prev_raw, prev_vel, course_len, neighbours)
+        else:
+            _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
+    for k in range(n):
+        out_step[k] = positions[idx[k]] - last_out[k]
+        last_out[k] = positions[idx[k]]
+        last_status[k] = status[idx[k]]
+    has_last[0] = True
