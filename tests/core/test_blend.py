@@ -1,4 +1,4 @@
-"""The blend at both ends of a gap (blend.blend_transitions, LimbFiller's blend_half_life_s)."""
+"""The blend at both ends of a gap (mocap_core/blend.py: blend_transitions, blend_frames; LimbFiller's blend_half_life_s)."""
 import math
 
 import numpy as np
