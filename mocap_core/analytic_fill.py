@@ -16,11 +16,11 @@ What these fills hand over is blended into the output by mocap_core.blend.
 from __future__ import annotations
 
 import math
+
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import (angle_about, axis_angle, mm, mtv, mv, rotation_between, vcross,
-                                   vdot, vnorm)
+from mocap_core.ik.kernels import angle_about, axis_angle, mm, mtv, mv, rotation_between, vcross, vdot, vnorm
 
 MISSING, LOCATED, ESTIMATED, HELD = 0, 1, 2, 3   # mocap_core.skeleton.Status
 MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted

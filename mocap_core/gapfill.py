@@ -26,8 +26,8 @@ import numpy as np
 from numba import njit
 
 from mocap_core import analytic_fill as af
-from mocap_core.blend import BlendState
 from mocap_core.analytic_fill import all_finite
+from mocap_core.blend import BlendState
 from mocap_core.body_model import BODY_MODEL_HELP, END_MODEL_HELP, END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
