@@ -22,11 +22,12 @@ come apart from their learned spacing: then a marker is wrong, and the offsets a
 
 Where the frames' times are known, the knee's poses are also looked for by where the toe is going: a walking
 toe passes each place twice a step, in the swing and in the stance, with the knee bent differently
-(VELOCITY_S). walk1's knees 43 / 56 -> 31 / 43 mm.
+(VELOCITY_S). walk1's knees 43 / 56 -> 31 / 43 mm. The poses found are fitted, not averaged: the targets'
+offsets as a linear function of the poses' toes, read off at the toe now (LOCAL_FIT_RIDGE).
 
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
-pose of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
-leg what the other did before). Always pooled, they made the walks worse (the two legs' markers
+place of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
+leg what the other did before); the velocity's search then looks there too. Always pooled, they made the walks worse (the two legs' markers
 sit differently); as a fallback, dance1's knee went from 43 to 33 mm and nothing got worse by more
 than 4 mm.
 
@@ -58,7 +59,12 @@ TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 # is seen are left to it.
 HEEL = "FCC"
 NEIGHBOURS = 20     # remembered poses averaged (dance1: 10 gives the same error, 20 half the jitter)
-FALLBACK_M = 0.1    # no own pose this near (the key's distance): the other leg's, mirrored, if one is nearer
+# No own pose had the toe this near: the other leg's, mirrored, if one did. Decided by the toe's place alone
+# (stop 37): until then the velocity's search decided by its own key, whose distances are larger, and fell
+# back on the other leg's poses for 29-91 % of the frames (prototype; 0-25 % by the place), taking the walks'
+# knees from their own steps. Deciding by the place: the sixteen means 532.2 -> 526.0 mm (walk2 left's knee
+# 36.9 -> 33.9); never falling back in that search: 524.5, but a pose only the other leg had made was lost.
+FALLBACK_M = 0.1
 # Per frame: how far the estimate moves towards the remembered poses' mean. Their neighbours change as the toe
 # moves, and the mean jumps with them. Knee+ankle on the dance set, 0.5 -> 0.2: hidden 0.1 s in every 0.5 s
 # (dance2 left), 20.5 / 21.5 -> 17.9 / 17.8 mm mean, the ankle's largest added move at loss 1.39x -> 0.82x its
@@ -119,6 +125,15 @@ FOOT_SOUND_FRAMES = 20
 # (dance1, 0.1 s in every 0.5 s): 1.38x its normal step (1.36x before; 1.44x at 0.15 s, 1.52x with the velocity
 # search alone).
 VELOCITY_S = 0.4
+# The twenty poses found are not averaged but fitted (local_fit): each target's offset as a linear function of
+# where the pose's toe was, read off where the toe is now. A fixed TOE_SHARE says how the knee follows the toe
+# everywhere; the fit learns it near the pose, where the knee may follow the toe one way forward and another
+# sideways. The fit's slope is pulled towards zero (the weighted mean) by LOCAL_FIT_RIDGE against the
+# poses' toes' spread (weighted, m^2): with the toes within a few cm of each other the mean stays. Knee+ankle
+# hidden (as above), stop 37: the sixteen means 526.0 -> 514.7 mm (walk2's knees 33.9 / 31.8 -> 31.0 / 29.5,
+# walk1 right's ankle 48.7 -> 46.9); 0.003 / 0.01: 514.4 / 516.5 (0.003 took walk1 right's knee max to 150
+# mm). On short gaps (0.1 s in every 0.5 s) the largest added move at return stays within 1.41x (dance1's knee).
+LOCAL_FIT_RIDGE = 0.005
 MAX_STEP_S = 0.1  # frames further apart than this give no velocity (the last one is kept)
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
 
@@ -277,40 +292,60 @@ def toe_velocity(motion, toe, time_s):
 
 
 @njit(cache=True)
-def recall(keys, offsets, state, point, can_fall_back, line, share, nt, width):
+def recall(keys, offsets, state, point, source, line, share, nt, width):
     """The targets' offsets (nt, 3) where the NEIGHBOURS poses of one leg's memory (``keys``, ``offsets``,
     ``state``: its own [0] and the other leg's [1]) whose key is nearest ``point`` had them, less each
     target's ``share`` of its toe; a target kept as far from the toe as it was (share 1) turned as the foot's
     ``line`` has turned since, when both are known. ``point``: the toe (3: the keys' first three numbers are
-    compared), or the toe and its velocity (6).
-    Also how far the poses' targets spread about that mean (nt: the weighted variance, m^2)."""
+    compared), or the toe and its velocity (6). ``source``: the memory searched, the leg's own (0) or the
+    other leg's (1), or -1: the leg's own, unless none of its poses comes within FALLBACK_M of ``point`` and
+    one of the other leg's is nearer.
+    Each offset is the local fit's (local_fit) at the toe's place. Also returns how far the poses' offsets
+    spread about their weighted mean (nt: the weighted variance, m^2), and the memory searched."""
     best_d, best_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
-    nearest(keys[0], state[0, 0], point, best_d, best_i)
-    source = 0
-    if can_fall_back and best_d[0] > FALLBACK_M and state[1, 0] >= NEIGHBOURS:
-        other_d, other_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
-        nearest(keys[1], state[1, 0], point, other_d, other_i)
-        if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
-            best_d, best_i, source = other_d, other_i, 1
-    mean, total, sq = np.zeros((nt, 3)), 0.0, np.zeros(nt)
+    nearest(keys[max(source, 0)], state[max(source, 0), 0], point, best_d, best_i)
+    if source < 0:
+        source = 0
+        if best_d[0] > FALLBACK_M and state[1, 0] >= NEIGHBOURS:
+            other_d, other_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
+            nearest(keys[1], state[1, 0], point, other_d, other_i)
+            if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
+                best_d, best_i, source = other_d, other_i, 1
+    weights, toe_offsets = np.empty(NEIGHBOURS), np.empty((NEIGHBOURS, 3))
+    found = np.empty((nt, NEIGHBOURS, 3))
     turning = vnorm(line) > 0.0  # (no line now: nothing to turn)
     turn = np.eye(3)
     for n in range(NEIGHBOURS):
-        w = 1.0 / (best_d[n] + 1e-3)
+        weights[n] = 1.0 / (best_d[n] + 1e-3)
         pose, pose_toe = offsets[source, best_i[n]], keys[source, best_i[n], :3]
+        toe_offsets[n] = pose_toe - point[:3]
         if turning:  # (the identity when the pose had no line)
             turn = rotation_between(pose[width], line)
         for t in range(nt):
             offset = pose[t] - share[t] * pose_toe
-            offset = mv(turn, offset) if turning and share[t] == 1.0 else offset
-            mean[t] += w * offset
-            sq[t] += w * (offset ** 2).sum()
-        total += w
-    mean /= total
-    spread = np.empty(nt)  # (their weighted variance about it)
+            found[t, n] = mv(turn, offset) if turning and share[t] == 1.0 else offset
+    weights /= weights.sum()
+    mean, spread = np.empty((nt, 3)), np.empty(nt)
     for t in range(nt):
-        spread[t] = max(sq[t] / total - (mean[t] ** 2).sum(), 1e-8)
-    return mean, spread
+        average = weights @ found[t]
+        spread[t] = max(weights @ ((found[t] - average) ** 2).sum(axis=1), 1e-8)
+        mean[t] = local_fit(weights, toe_offsets, found[t])
+    return mean, spread, source
+
+
+@njit(cache=True)
+def local_fit(weights, toe_offsets, found):
+    """Where a linear fit of the poses' offsets ``found`` (n, 3) over their toes' offsets from the toe now
+    (``toe_offsets``, n x 3), weighted by ``weights`` (summing to 1), puts the toe now: the intercept of a
+    weighted least-squares fit whose slope is pulled towards zero by LOCAL_FIT_RIDGE (zero slope: the
+    weighted mean, the fixed TOE_SHARE alone)."""
+    design = np.ones((len(weights), 4))
+    design[:, 1:] = toe_offsets
+    weighted = design.T * weights
+    normal = weighted @ design
+    for i in range(1, 4):
+        normal[i, i] += LOCAL_FIT_RIDGE
+    return np.linalg.solve(normal, weighted @ found)[0]
 
 
 @njit(cache=True)
@@ -363,10 +398,10 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
         # the poses found by the toe's place, and by its place and velocity (VELOCITY_S): the ankle (turned with
         # the foot) from the first, the knee from both, each weighted by how closely its poses agree (the second
         # search's ankle is not used, so it is not turned: no line)
-        mean, place_spread = recall(keys[g], offsets[g], state[g], local_toe, mirror[g] >= 0, line, toe_share[g],
-                                    nt, width)
-        by_motion, motion_spread = recall(keys[g], offsets[g], state[g], pose_key, mirror[g] >= 0, no_line,
-                                          toe_share[g], nt, width)
+        mean, place_spread, source = recall(keys[g], offsets[g], state[g], local_toe, -1 if mirror[g] >= 0 else 0,
+                                            line, toe_share[g], nt, width)
+        by_motion, motion_spread, _ = recall(keys[g], offsets[g], state[g], pose_key, source, no_line, toe_share[g],
+                                             nt, width)
         for t in range(nt):
             if toe_share[g, t] != 1.0:
                 w = place_spread[t] / (place_spread[t] + motion_spread[t])
