@@ -5,7 +5,7 @@ from mocap_core.experiments import gap_run
 from mocap_core.gapfill import BEYOND_THESIS
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.ik.kernels import rotation_vector, turned_by
-from mocap_core.pose_memory import NEIGHBOURS, PELVIS_GAIN, PoseMemory, pelvis_frame, track_pelvis
+from mocap_core.pose_memory import NEIGHBOURS, PELVIS_GAIN, PoseMemory, local_fit, pelvis_frame, track_pelvis
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
 from mocap_core.recordings import read_recording
 from tests.conftest import data_file
@@ -139,6 +139,31 @@ def test_walk1_knee_and_ankle_from_a_memory_of_two_seconds():
     (knee, ankle), (knee0, ankle0) = (_dance_gap("walk1", "l", m, 2.0, None) for m in (True, False))
     assert knee < 0.03 and ankle < 0.03, (knee, ankle)
     assert knee < 0.5 * knee0 and ankle < 0.7 * ankle0, (knee, ankle, knee0, ankle0)
+
+
+def test_walk2_right_knee_and_ankle_meet_issue_9s_target():
+    """walk2's right leg hidden from 2 s to the end: the knee 34.5 mm before stop 37, when the poses found were
+    averaged and the velocity's search fell back on the other leg's poses by its own key."""
+    knee, ankle = _dance_gap("walk2", "r", True, 2.0, None)
+    assert knee < 0.03 and ankle < 0.03, (knee, ankle)
+
+
+def test_the_local_fit_reads_a_linear_leg_off_at_the_toe_known_answer():
+    """Poses whose targets follow their toes linearly, all found to one side of the toe now (as at the edge of
+    what the memory has seen): their weighted mean is off by the slope times their mean offset; the fit's
+    intercept recovers most of it. With no slope, or all toes in one place, it is the weighted mean."""
+    rng = np.random.default_rng(3)
+    weights = rng.uniform(0.5, 1.5, NEIGHBOURS)
+    weights /= weights.sum()
+    toe_offsets = np.zeros((NEIGHBOURS, 3))
+    toe_offsets[:, 1] = rng.uniform(0.0, 0.4, NEIGHBOURS)   # forward, 0-40 cm
+    toe_offsets[:, 0] = rng.uniform(-0.05, 0.05, NEIGHBOURS)
+    here, slope = np.array([0.1, 0.02, -0.45]), np.array([[0.0, 0.1, 0.0], [0.0, 0.7, 0.0], [0.0, 0.2, 0.0]])
+    found = here + toe_offsets @ slope.T
+    fitted, averaged = local_fit(weights, toe_offsets, found), weights @ found
+    assert np.linalg.norm(fitted - here) < 0.35 * np.linalg.norm(averaged - here), (fitted, averaged)
+    np.testing.assert_allclose(local_fit(weights, toe_offsets, np.tile(here, (NEIGHBOURS, 1))), here, atol=1e-12)
+    np.testing.assert_allclose(local_fit(weights, np.zeros((NEIGHBOURS, 3)), found), averaged, atol=1e-12)
 
 
 FOOT = ("L_foot", "L_foot")  # the toe markers one by one: the tracking markers of the left foot
