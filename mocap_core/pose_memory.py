@@ -27,9 +27,9 @@ offsets as a linear function of the poses' toes, read off at the toe now (LOCAL_
 
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 place of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
-leg what the other did before); the velocity's search then looks there too. Always pooled, they made the walks worse (the two legs' markers
-sit differently); as a fallback, dance1's knee went from 43 to 33 mm and nothing got worse by more
-than 4 mm.
+leg what the other did before); the velocity's search then looks there too. Always pooled, they made
+the walks worse (the two legs' markers sit differently); as a fallback, dance1's knee went from 43 to
+33 mm and nothing got worse by more than 4 mm.
 
 Issue 9's "bone lengths learned online from located frames", taken one step further: the whole
 leg's shape, learned from the same take. It never uses frames it has not seen (a live graph
@@ -44,7 +44,7 @@ from numba import njit
 
 from mocap_core.ik.kernels import follow, mm, mtv, mv, rotation_between, rotation_vector, turned_by, vfinite, vnorm
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
-from mocap_core.remembered_poses import CAPACITY, keep, nearest  # poses a leg; a pose kept per 5 mm of its key
+from mocap_core.remembered_poses import CAPACITY, keep, local_fit, nearest  # poses a leg; a pose per 5 mm of its key
 
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
                     "toe nearest where it is now had them (the knee's also by where the toe is going: the frames' "
@@ -125,10 +125,10 @@ FOOT_SOUND_FRAMES = 20
 # (dance1, 0.1 s in every 0.5 s): 1.38x its normal step (1.36x before; 1.44x at 0.15 s, 1.52x with the velocity
 # search alone).
 VELOCITY_S = 0.4
-# The twenty poses found are not averaged but fitted (local_fit): each target's offset as a linear function of
-# where the pose's toe was, read off where the toe is now. A fixed TOE_SHARE says how the knee follows the toe
-# everywhere; the fit learns it near the pose, where the knee may follow the toe one way forward and another
-# sideways. The fit's slope is pulled towards zero (the weighted mean) by LOCAL_FIT_RIDGE against the
+# The twenty poses found are not averaged but fitted (remembered_poses.local_fit): each target's offset as a
+# linear function of where the pose's toe was, read off where the toe is now. A fixed TOE_SHARE says how the
+# knee follows the toe everywhere; the fit learns it near the pose, where the knee may follow the toe one way
+# forward and another sideways. The fit's slope is pulled towards zero (the weighted mean) by LOCAL_FIT_RIDGE against the
 # poses' toes' spread (weighted, m^2): with the toes within a few cm of each other the mean stays. Knee+ankle
 # hidden (as above), stop 37: the sixteen means 526.0 -> 514.7 mm (walk2's knees 33.9 / 31.8 -> 31.0 / 29.5,
 # walk1 right's ankle 48.7 -> 46.9); 0.003 / 0.01: 514.4 / 516.5 (0.003 took walk1 right's knee max to 150
@@ -300,8 +300,8 @@ def recall(keys, offsets, state, point, source, line, share, nt, width):
     compared), or the toe and its velocity (6). ``source``: the memory searched, the leg's own (0) or the
     other leg's (1), or -1: the leg's own, unless none of its poses comes within FALLBACK_M of ``point`` and
     one of the other leg's is nearer.
-    Each offset is the local fit's (local_fit) at the toe's place. Also returns how far the poses' offsets
-    spread about their weighted mean (nt: the weighted variance, m^2), and the memory searched."""
+    Each offset is the local fit's (remembered_poses.local_fit) at the toe's place. Also returns how far the
+    poses' offsets spread about their weighted mean (nt: the weighted variance, m^2), and the memory searched."""
     best_d, best_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
     nearest(keys[max(source, 0)], state[max(source, 0), 0], point, best_d, best_i)
     if source < 0:
@@ -329,23 +329,8 @@ def recall(keys, offsets, state, point, source, line, share, nt, width):
     for t in range(nt):
         average = weights @ found[t]
         spread[t] = max(weights @ ((found[t] - average) ** 2).sum(axis=1), 1e-8)
-        mean[t] = local_fit(weights, toe_offsets, found[t])
+        mean[t] = local_fit(weights, toe_offsets, found[t], LOCAL_FIT_RIDGE)
     return mean, spread, source
-
-
-@njit(cache=True)
-def local_fit(weights, toe_offsets, found):
-    """Where a linear fit of the poses' offsets ``found`` (n, 3) over their toes' offsets from the toe now
-    (``toe_offsets``, n x 3), weighted by ``weights`` (summing to 1), puts the toe now: the intercept of a
-    weighted least-squares fit whose slope is pulled towards zero by LOCAL_FIT_RIDGE (zero slope: the
-    weighted mean, the fixed TOE_SHARE alone)."""
-    design = np.ones((len(weights), 4))
-    design[:, 1:] = toe_offsets
-    weighted = design.T * weights
-    normal = weighted @ design
-    for i in range(1, 4):
-        normal[i, i] += LOCAL_FIT_RIDGE
-    return np.linalg.solve(normal, weighted @ found)[0]
 
 
 @njit(cache=True)

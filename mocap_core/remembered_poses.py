@@ -1,7 +1,7 @@
 """The store both pose memories keep (mocap_core.pose_memory in the hip stage, mocap_core.limb_memory in
 the IK stage): a ring of remembered poses, each a key point and what went with it, and a search for
 the poses whose key is nearest a point (a key: a point in 3-D, or longer: the pose memory adds the toe's
-velocity)."""
+velocity), and a local fit of what the poses found had with them."""
 from __future__ import annotations
 
 import numpy as np
@@ -43,3 +43,20 @@ def nearest(keys, count, point, best_d, best_i, offset=0):
                 best_d[j], best_i[j] = best_d[j - 1], best_i[j - 1]
                 j -= 1
             best_d[j], best_i[j] = d, offset + i
+
+
+@njit(cache=True)
+def local_fit(weights, key_offsets, found, ridge):
+    """Where a linear fit of the remembered poses' values ``found`` (n, 3) over their keys' offsets from the
+    key now (``key_offsets``, n x 3), weighted by ``weights`` (summing to 1), puts the key now: the intercept
+    of a weighted least-squares fit whose slope is pulled towards none by ``ridge`` (m^2, against the keys'
+    weighted spread). Poses found all to one side of the key (at the edge of what was seen) have a mean off
+    by however the value follows the key there; the fit reads it off where the key is. With no slope, or
+    all keys in one place, it is the weighted mean."""
+    design = np.ones((len(weights), 4))
+    design[:, 1:] = key_offsets
+    weighted = design.T * weights
+    normal = weighted @ design
+    for i in range(1, 4):
+        normal[i, i] += ridge
+    return np.linalg.solve(normal, weighted @ found)[0]

@@ -5,9 +5,10 @@ from mocap_core.experiments import gap_run
 from mocap_core.gapfill import BEYOND_THESIS
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.ik.kernels import rotation_vector, turned_by
-from mocap_core.pose_memory import NEIGHBOURS, PELVIS_GAIN, PoseMemory, local_fit, pelvis_frame, track_pelvis
+from mocap_core.pose_memory import LOCAL_FIT_RIDGE, NEIGHBOURS, PELVIS_GAIN, PoseMemory, pelvis_frame, track_pelvis
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
 from mocap_core.recordings import read_recording
+from mocap_core.remembered_poses import local_fit
 from tests.conftest import data_file
 
 DANCE = "13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"
@@ -160,10 +161,12 @@ def test_the_local_fit_reads_a_linear_leg_off_at_the_toe_known_answer():
     toe_offsets[:, 0] = rng.uniform(-0.05, 0.05, NEIGHBOURS)
     here, slope = np.array([0.1, 0.02, -0.45]), np.array([[0.0, 0.1, 0.0], [0.0, 0.7, 0.0], [0.0, 0.2, 0.0]])
     found = here + toe_offsets @ slope.T
-    fitted, averaged = local_fit(weights, toe_offsets, found), weights @ found
+    fitted, averaged = local_fit(weights, toe_offsets, found, LOCAL_FIT_RIDGE), weights @ found
     assert np.linalg.norm(fitted - here) < 0.35 * np.linalg.norm(averaged - here), (fitted, averaged)
-    np.testing.assert_allclose(local_fit(weights, toe_offsets, np.tile(here, (NEIGHBOURS, 1))), here, atol=1e-12)
-    np.testing.assert_allclose(local_fit(weights, np.zeros((NEIGHBOURS, 3)), found), averaged, atol=1e-12)
+    np.testing.assert_allclose(local_fit(weights, toe_offsets, np.tile(here, (NEIGHBOURS, 1)), LOCAL_FIT_RIDGE), here,
+                               atol=1e-12)
+    np.testing.assert_allclose(local_fit(weights, np.zeros((NEIGHBOURS, 3)), found, LOCAL_FIT_RIDGE), averaged,
+                               atol=1e-12)
 
 
 FOOT = ("L_foot", "L_foot")  # the toe markers one by one: the tracking markers of the left foot
