@@ -128,11 +128,12 @@ VELOCITY_S = 0.4
 # The twenty poses found are not averaged but fitted (remembered_poses.local_fit): each target's offset as a
 # linear function of where the pose's toe was, read off where the toe is now. A fixed TOE_SHARE says how the
 # knee follows the toe everywhere; the fit learns it near the pose, where the knee may follow the toe one way
-# forward and another sideways. The fit's slope is pulled towards zero (the weighted mean) by LOCAL_FIT_RIDGE against the
-# poses' toes' spread (weighted, m^2): with the toes within a few cm of each other the mean stays. Knee+ankle
-# hidden (as above), stop 37: the sixteen means 526.0 -> 514.7 mm (walk2's knees 33.9 / 31.8 -> 31.0 / 29.5,
-# walk1 right's ankle 48.7 -> 46.9); 0.003 / 0.01: 514.4 / 516.5 (0.003 took walk1 right's knee max to 150
-# mm). On short gaps (0.1 s in every 0.5 s) the largest added move at return stays within 1.41x (dance1's knee).
+# forward and another sideways. The fit's slope is pulled towards zero (the weighted mean) by LOCAL_FIT_RIDGE
+# against the poses' toes' spread (weighted, m^2): with the toes within a few cm of each other the mean stays.
+# Knee+ankle hidden (as above), stop 37: the sixteen means 526.0 -> 514.7 mm (walk2's knees 33.9 / 31.8 ->
+# 31.0 / 29.5, walk1 right's ankle 48.7 -> 46.9); 0.003 / 0.01: 514.4 / 516.5 (0.003 took walk1 right's knee
+# max to 150 mm). On short gaps (0.1 s in every 0.5 s) the largest added move at return stays within 1.41x
+# (dance1's knee).
 LOCAL_FIT_RIDGE = 0.005
 MAX_STEP_S = 0.1  # frames further apart than this give no velocity (the last one is kept)
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
