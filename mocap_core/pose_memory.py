@@ -20,7 +20,7 @@ how the foot is turned, which the toe's place alone does not: the ankle's offset
 remembered pose is turned as its foot's line is turned now (foot_line). Unless the two markers have
 come apart from their learned spacing: then a marker is wrong, and the offsets are taken as they were.
 
-Where the frames' times are known, the knee's poses are also looked for by where the toe is going: a walking
+Where the frames' times are known, the poses are also looked for by where the toe is going: a walking
 toe passes each place twice a step, in the swing and in the stance, with the knee bent differently
 (VELOCITY_S). walk1's knees 43 / 56 -> 31 / 43 mm. The poses found are fitted, not averaged: the targets'
 offsets as a linear function of the poses' toes, read off at the toe now (LOCAL_FIT_RIDGE).
@@ -47,7 +47,7 @@ from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 from mocap_core.remembered_poses import CAPACITY, keep, local_fit, nearest  # poses a leg; a pose per 5 mm of its key
 
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
-                    "toe nearest where it is now had them (the knee's also by where the toe is going: the frames' "
+                    "toe nearest where it is now had them (also by where the toe is going: the frames' "
                     "times give its velocity), for marker sets with nothing else left on shank and foot")
 KEY = "FM2"                             # the toe: every profile has it
 # The knee's and the ankle's landmarks, and how much of the toe's offset from the remembered poses'
@@ -109,13 +109,16 @@ FOOT_WIDTH_RATE = 1 / 100   # how fast the learned spacing follows the frames wh
 # 1.47 / 1.43x; the sixteen long-gap means 598-602 mm throughout. (The tolerance 0.1 / 0.3 with 20 frames:
 # 622 / 598 mm, 1.43 / 1.49x.)
 FOOT_SOUND_FRAMES = 20
-# The toe's velocity (in the pelvis frame) helps find the knee's poses. A walking toe passes each place twice a
+# The toe's velocity (in the pelvis frame) helps find the leg's poses. A walking toe passes each place twice a
 # step, forward in the swing and back (in the pelvis's frame) in the stance, with the knee bent differently each
 # time. A second search finds the poses by the toe's place and VELOCITY_S times its velocity (where it will be
 # VELOCITY_S from now; the velocity from one frame to the next), and the knee is the two searches' answers
 # weighted by how closely each one's poses agree (inverse variance): where the velocity tells nothing (a dancer
-# standing on one foot) its poses spread and the place's answer stays. The ankle is found by the place alone:
-# with the velocity the walks' ankles got worse (walk2 right 24 -> 31 mm), the foot's line turns it instead.
+# standing on one foot) its poses spread and the place's answer stays. Until stop 37 the ankle was found by the
+# place alone: with the velocity the walks' ankles got worse (walk2 right 24 -> 31 mm). With both searches'
+# poses fitted (LOCAL_FIT_RIDGE) and turned with the foot's line, the ankle is weighted as the knee is: the
+# sixteen means 514.7 -> 510.1 mm, six of the eight ankles better (dance2 left 38.8 -> 34.6, walk1 left 22.8
+# -> 19.9), walk1 right's 46.9 -> 50.6 and walk2 left's 25.6 -> 27.5 worse; short gaps unchanged (0.2 mm).
 # Knee+ankle hidden (joint level, studio options; the walks from 2 s to the end, the dances 5-15 s), the knee's
 # mean: walk1 left 42.8 -> 30.8 mm, right 56.1 -> 42.8, walk2 42.0 -> 39.6 and 45.5 -> 37.8, dance2 45.8 -> 42.3
 # and 34.3 -> 33.6, dance1 right 25.7 -> 23.2, left 29.8 -> 29.9; the ankles within 0.4 mm. The sixteen means
@@ -344,7 +347,7 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
     track_pelvis(origin, rot, pelvis_axes, pelvis_motion)
     flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
     flip_key = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0])
-    pose_key, no_line = np.empty(6), np.zeros(3)
+    pose_key = np.empty(6)
     width = legs.shape[1] - 3
     seen = np.zeros((width + 1, 3))  # the targets, then the foot's line
     for g in range(legs.shape[0]):
@@ -381,17 +384,15 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
             continue
         if state[g, 0, 0] < NEIGHBOURS:
             continue
-        # the poses found by the toe's place, and by its place and velocity (VELOCITY_S): the ankle (turned with
-        # the foot) from the first, the knee from both, each weighted by how closely its poses agree (the second
-        # search's ankle is not used, so it is not turned: no line)
+        # the poses found by the toe's place, and by its place and velocity (VELOCITY_S), in the same memory: each
+        # target from both, weighted by how closely each search's poses agree
         mean, place_spread, source = recall(keys[g], offsets[g], state[g], local_toe, -1 if mirror[g] >= 0 else 0,
                                             line, toe_share[g], nt, width)
-        by_motion, motion_spread, _ = recall(keys[g], offsets[g], state[g], pose_key, source, no_line, toe_share[g],
+        by_motion, motion_spread, _ = recall(keys[g], offsets[g], state[g], pose_key, source, line, toe_share[g],
                                              nt, width)
         for t in range(nt):
-            if toe_share[g, t] != 1.0:
-                w = place_spread[t] / (place_spread[t] + motion_spread[t])
-                mean[t] = w * by_motion[t] + (1.0 - w) * mean[t]
+            w = place_spread[t] / (place_spread[t] + motion_spread[t])
+            mean[t] = w * by_motion[t] + (1.0 - w) * mean[t]
         if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps
             if np.isnan(last_seen[g, 0, 0]):
                 estimate[g, :nt] = mean
