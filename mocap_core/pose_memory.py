@@ -7,7 +7,7 @@ freedom (the knee's bend direction, the ankle's angle) are not observed at all. 
 what the actor has done before: while a leg is seen whole, its knee and ankle landmarks are
 remembered in the pelvis's frame (tracked, so that its skin markers' shake stays out: track_pelvis),
 together with where the toe was. Once they are lost (and the toe and the pelvis are seen), they are
-put where the remembered poses whose toe was nearest had them (inverse-distance weighted mean),
+put where the remembered poses whose toe was nearest had them (inverse-distance weighted, fitted),
 smoothed over frames, starting from the last pose seen so that nothing jumps when the markers go.
 The ankle goes as far from the toe as it was in those poses (the foot keeps it near the toe); the
 knee goes where they had it in the pelvis's frame (the thigh keeps it near the hip), moved by 30 % of
@@ -58,14 +58,14 @@ TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 # knee+ankle hidden from 0.5 s: 33 / 11 mm, where the memory of 0.5 s gives 53 / 46): legs whose heel
 # is seen are left to it.
 HEEL = "FCC"
-NEIGHBOURS = 20     # remembered poses averaged (dance1: 10 gives the same error, 20 half the jitter)
+NEIGHBOURS = 20     # remembered poses fitted (dance1: 10 gave the same error, 20 half the jitter)
 # No own pose had the toe this near: the other leg's, mirrored, if one did. Decided by the toe's place alone
 # (stop 37): until then the velocity's search decided by its own key, whose distances are larger, and fell
 # back on the other leg's poses for 29-91 % of the frames (prototype; 0-25 % by the place), taking the walks'
 # knees from their own steps. Deciding by the place: the sixteen means 532.2 -> 526.0 mm (walk2 left's knee
 # 36.9 -> 33.9); never falling back in that search: 524.5, but a pose only the other leg had made was lost.
 FALLBACK_M = 0.1
-# Per frame: how far the estimate moves towards the remembered poses' mean. Their neighbours change as the toe
+# Per frame: how far the estimate moves towards the remembered poses' answer. Their neighbours change as the toe
 # moves, and the mean jumps with them. Knee+ankle on the dance set, 0.5 -> 0.2: hidden 0.1 s in every 0.5 s
 # (dance2 left), 20.5 / 21.5 -> 17.9 / 17.8 mm mean, the ankle's largest added move at loss 1.39x -> 0.82x its
 # normal step; hidden 5-15 s, dance1 27.7 / 66.6 -> 28.8 / 66.8, dance2 48.9 / 54.9 -> 47.1 / 53.9, walk1
