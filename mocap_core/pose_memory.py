@@ -76,7 +76,12 @@ FALLBACK_M = 0.1
 # the knee's largest added move at return on short gaps 1.38x -> 1.43x (dance1), 1.12x -> 1.30x (dance2). 0.35 /
 # 0.4 / 0.5: 526 / 523 / 522, with 1.46x / 1.51x / 1.61x at return (dance1); a tracked step (alpha-beta) added
 # nothing, a step predicted from the poses' own motion 516-526 with the return at 1.45-1.48x (docs/gap_filling.md).
-SMOOTHING = 0.3
+# Stop 37, 0.3 -> 0.5: the fitted recall (LOCAL_FIT_RIDGE) jumps less as its poses change, and the lighter
+# smoothing now keeps the return within 1.5x: the sixteen means 510.1 -> 489.8 mm (walk2's knees 31.2 / 29.5 ->
+# 29.5 / 25.9, walk1 right's 35.9 -> 31.5), short gaps (all eight legs) 176.0 -> 173.0 mm, the largest added move
+# at return 1.40x -> 1.44x (dance1's knee), at loss 1.46x (unchanged). 0.4 / 0.7 / 1: 495.3 / 488.9 / 495.9 mm,
+# 1.42x / 1.63x / 2.11x at return.
+SMOOTHING = 0.5
 # The pelvis frame the poses are kept in and recalled from comes from three skin markers (the ASIS and the
 # sacrum), and its turn from one frame to the next changes by 0.3-0.4 deg (median) and 1.3-2.7 deg (95th
 # percentile) on the dance set, up to 13. 0.45 m down the leg a degree is 8 mm, and where one hip marker
