@@ -3,7 +3,8 @@
 The client is asyncio; it runs in a thread of its own and hands frames to the node over a queue,
 so the node's loop (heartbeats, publishing) never waits on the network. Labels and rate come from
 the 3D and General parameters at every (re)connection; a label change publishes a new MarkerSet.
-When QTM goes away the thread reconnects with backoff (0.5 s doubling to 5 s) and says so. A bad
+When QTM goes away the thread reconnects with backoff (0.5 s doubling to 5 s) and says so; a
+connection that QTM never answers is given up after ``timeout_s``. A bad
 packet is counted and skipped; nothing from the network can stop the node.
 """
 from __future__ import annotations
@@ -103,8 +104,12 @@ class QtmIngest(Node):
         was_connected = False
         while not self.stopping.is_set():
             lost = asyncio.Event()
-            conn = await qtm_rt.connect(p.host, port=p.port, version=p.version, timeout=p.timeout_s,
-                                        on_disconnect=lambda exc: lost.set(), on_event=self._on_event)
+            try:  # (qtm_rt waits for QTM's answer to its version command without a timeout of its own)
+                conn = await asyncio.wait_for(
+                    qtm_rt.connect(p.host, port=p.port, version=p.version, timeout=p.timeout_s,
+                                   on_disconnect=lambda exc: lost.set(), on_event=self._on_event), p.timeout_s)
+            except asyncio.TimeoutError:
+                conn = None
             if conn is None:
                 self.log.warning("QTM at %s:%d not reachable; retrying in %.1f s", p.host, p.port, backoff)
                 await self._sleep(backoff)

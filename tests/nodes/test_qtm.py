@@ -149,6 +149,36 @@ nodes:
         assert "not reachable; retrying" in g.log()
 
 
+def test_ingest_node_gives_up_on_a_qtm_that_accepts_and_never_answers(tmp_path):
+    """Something listens on QTM's port and says nothing (a QTM still starting, a wrong service): the client
+    waits for the answer to its version command with no timeout of its own. The node's connect times out,
+    and once the real QTM is there it streams."""
+    port = free_port()
+    out = tmp_path / "raw.csv"
+    graph = f"""
+nodes:
+  - id: qtm
+    kind: qtm_ingest
+    params: {{port: {port}, timeout_s: 1.0, max_backoff_s: 0.5}}
+  - id: log
+    kind: frame_log
+    params: {{path: {out}}}
+    remaps: {{in: markers/raw}}
+"""
+    silent = socket.socket()
+    silent.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    silent.bind(("127.0.0.1", port))
+    silent.listen(8)
+    with launched(tmp_path, graph) as g:
+        try:
+            held, _ = silent.accept()  # the node's client connects, and hears nothing
+        finally:
+            silent.close()
+        with held, emulator(tmp_path, "--loop", port=port):
+            wait_for(lambda: len(log_rows(out)) > 50, 30, "frames once QTM answers")
+        assert g.proc.poll() is None and "not reachable; retrying" in g.log(), g.log()[-2000:]
+
+
 def test_ingest_skips_frames_from_before_the_graph_was_ready(tmp_path):
     """QTM streams while a slow node still starts: those frames are stale and must not enter the graph as a
     burst seconds late (every logged frame is fresh)."""
