@@ -119,19 +119,25 @@ def test_occluded_markers_are_all_ones_and_garbage_clients_are_dropped(tmp_path)
         assert proc.poll() is None
 
 
-def test_ingest_node_survives_qtm_restarts(tmp_path):
-    port = free_port()
-    out = tmp_path / "raw.csv"
-    graph = f"""
+def _ingest_to_log(port: int, out, params: str = "") -> str:
+    """A graph of the ingest node on ``port`` (retrying every 0.5 s at most; more ``params``) logging every
+    frame to ``out``."""
+    return f"""
 nodes:
   - id: qtm
     kind: qtm_ingest
-    params: {{port: {port}, max_backoff_s: 0.5}}
+    params: {{port: {port}, max_backoff_s: 0.5{params}}}
   - id: log
     kind: frame_log
     params: {{path: {out}}}
     remaps: {{in: markers/raw}}
 """
+
+
+def test_ingest_node_survives_qtm_restarts(tmp_path):
+    port = free_port()
+    out = tmp_path / "raw.csv"
+    graph = _ingest_to_log(port, out)
 
     def count():
         return len(log_rows(out))
@@ -155,16 +161,7 @@ def test_ingest_node_gives_up_on_a_qtm_that_accepts_and_never_answers(tmp_path):
     and once the real QTM is there it streams."""
     port = free_port()
     out = tmp_path / "raw.csv"
-    graph = f"""
-nodes:
-  - id: qtm
-    kind: qtm_ingest
-    params: {{port: {port}, timeout_s: 1.0, max_backoff_s: 0.5}}
-  - id: log
-    kind: frame_log
-    params: {{path: {out}}}
-    remaps: {{in: markers/raw}}
-"""
+    graph = _ingest_to_log(port, out, ", timeout_s: 1.0")
     silent = socket.socket()
     silent.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     silent.bind(("127.0.0.1", port))
