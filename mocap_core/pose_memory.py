@@ -321,7 +321,7 @@ def recall(keys, offsets, state, point, source, line, share, nt, width):
             if other_d[0] < best_d[0]:  # the other leg has been nearer this pose: its poses, mirrored
                 best_d, best_i, source = other_d, other_i, 1
     weights, toe_offsets = np.empty(NEIGHBOURS), np.empty((NEIGHBOURS, 3))
-    found = np.empty((nt, NEIGHBOURS, 3))
+    found = np.empty((NEIGHBOURS, nt, 3))
     turning = vnorm(line) > 0.0  # (no line now: nothing to turn)
     turn = np.eye(3)
     for n in range(NEIGHBOURS):
@@ -332,13 +332,14 @@ def recall(keys, offsets, state, point, source, line, share, nt, width):
             turn = rotation_between(pose[width], line)
         for t in range(nt):
             offset = pose[t] - share[t] * pose_toe
-            found[t, n] = mv(turn, offset) if turning and share[t] == 1.0 else offset
+            found[n, t] = mv(turn, offset) if turning and share[t] == 1.0 else offset
     weights /= weights.sum()
-    mean, spread = np.empty((nt, 3)), np.empty(nt)
+    every = found.reshape(NEIGHBOURS, nt * 3)  # (one fit for all the targets: the poses' toes are the same)
+    average = (weights @ every).reshape(nt, 3)
+    spread = np.empty(nt)
     for t in range(nt):
-        average = weights @ found[t]
-        spread[t] = max(weights @ ((found[t] - average) ** 2).sum(axis=1), 1e-8)
-        mean[t] = local_fit(weights, toe_offsets, found[t], LOCAL_FIT_RIDGE)
+        spread[t] = max(weights @ ((found[:, t] - average[t]) ** 2).sum(axis=1), 1e-8)
+    mean = np.ascontiguousarray(local_fit(weights, toe_offsets, every, LOCAL_FIT_RIDGE)).reshape(nt, 3)
     return mean, spread, source
 
 

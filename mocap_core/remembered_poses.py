@@ -47,12 +47,12 @@ def nearest(keys, count, point, best_d, best_i, offset=0):
 
 @njit(cache=True)
 def local_fit(weights, key_offsets, found, ridge):
-    """Where a linear fit of the remembered poses' values ``found`` (n, 3) over their keys' offsets from the
-    key now (``key_offsets``, n x 3), weighted by ``weights`` (summing to 1), puts the key now: the intercept
-    of a weighted least-squares fit whose slope is pulled towards none by ``ridge`` (m^2, against the keys'
-    weighted spread). Poses found all to one side of the key (at the edge of what was seen) have a mean off
-    by however the value follows the key there; the fit reads it off where the key is. With no slope, or
-    all keys in one place, it is the weighted mean."""
+    """Where a linear fit of the remembered poses' values ``found`` (n, k: each column fitted alike) over their
+    keys' offsets from the key now (``key_offsets``, n x 3), weighted by ``weights`` (summing to 1), puts the
+    key now (k): the intercept of a weighted least-squares fit whose slope is pulled towards none by ``ridge``
+    (m^2, against the keys' weighted spread). Poses found all to one side of the key (at the edge of what was
+    seen) have a mean off by however the value follows the key there; the fit reads it off where the key is.
+    With no slope, or all keys in one place, it is the weighted mean."""
     design = np.ones((len(weights), 4))
     design[:, 1:] = key_offsets
     weighted = design.T * weights
