@@ -59,89 +59,43 @@ TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 # is seen are left to it.
 HEEL = "FCC"
 NEIGHBOURS = 20     # remembered poses fitted (dance1: 10 gave the same error, 20 half the jitter)
-# No own pose had the toe this near: the other leg's, mirrored, if one did. Decided by the toe's place alone
-# (stop 37): until then the velocity's search decided by its own key, whose distances are larger, and fell
-# back on the other leg's poses for 29-91 % of the frames (prototype; 0-25 % by the place), taking the walks'
-# knees from their own steps. Deciding by the place: the sixteen means 532.2 -> 526.0 mm (walk2 left's knee
-# 36.9 -> 33.9); never falling back in that search: 524.5, but a pose only the other leg had made was lost.
+# How each setting below was chosen, with every value tried, is in docs/gap_filling.md ("The pose memory").
+# No own pose had the toe this near: the other leg's, mirrored, if one did. Decided by the toe's place alone;
+# the velocity's search then looks in the same memory (its own, larger distances fell back far too often).
 FALLBACK_M = 0.1
-# Per frame: how far the estimate moves towards the remembered poses' answer. Their neighbours change as the toe
-# moves, and the mean jumps with them. Knee+ankle on the dance set, 0.5 -> 0.2: hidden 0.1 s in every 0.5 s
-# (dance2 left), 20.5 / 21.5 -> 17.9 / 17.8 mm mean, the ankle's largest added move at loss 1.39x -> 0.82x its
-# normal step; hidden 5-15 s, dance1 27.7 / 66.6 -> 28.8 / 66.8, dance2 48.9 / 54.9 -> 47.1 / 53.9, walk1
-# 45.8 / 33.7 -> 43.9 / 33.5 (both before the blend's course weight, blend.course_weight). 0.1 took
-# dance1's knee to 30.2 and walk1's ankle to 40.0. Stop 33, 0.2 -> 0.3: with stop 32's velocity search the
-# recall follows a walking knee closely enough that the smoothing's lag (4 frames at 0.2) costs more than its
-# jitter; the sixteen knee and ankle means of the long gaps 560 -> 532 mm (walk1 right's knee 42.8 -> 37.9), and
-# the knee's largest added move at return on short gaps 1.38x -> 1.43x (dance1), 1.12x -> 1.30x (dance2). 0.35 /
-# 0.4 / 0.5: 526 / 523 / 522, with 1.46x / 1.51x / 1.61x at return (dance1); a tracked step (alpha-beta) added
-# nothing, a step predicted from the poses' own motion 516-526 with the return at 1.45-1.48x (docs/gap_filling.md).
-# Stop 37, 0.3 -> 0.5: the fitted recall (LOCAL_FIT_RIDGE) jumps less as its poses change, and the lighter
-# smoothing now keeps the return within 1.5x: the sixteen means 510.1 -> 489.8 mm (walk2's knees 31.2 / 29.5 ->
-# 29.5 / 25.9, walk1 right's 35.9 -> 31.5), short gaps (all eight legs) 176.0 -> 173.0 mm, the largest added move
-# at return 1.40x -> 1.44x (dance1's knee), at loss 1.46x (unchanged). 0.4 / 0.7 / 1: 495.3 / 488.9 / 495.9 mm,
-# 1.42x / 1.63x / 2.11x at return.
+# Per frame, how far the estimate moves towards the recalled answer, whose poses change as the toe moves:
+# a smaller share lags behind a walking knee, a larger one lets the recall's jumps through at a marker's return (0.7: 1.63x
+# the normal step on short gaps, against 1.44x here).
 SMOOTHING = 0.5
-# The pelvis frame the poses are kept in and recalled from comes from three skin markers (the ASIS and the
-# sacrum), and its turn from one frame to the next changes by 0.3-0.4 deg (median) and 1.3-2.7 deg (95th
-# percentile) on the dance set, up to 13. 0.45 m down the leg a degree is 8 mm, and where one hip marker
-# slipped (dance1 at 22.6 s) the recalled knee moved 27 mm in a frame, the true one 10; on dance2 at 19.0 s the
-# right ASIS slipped 127 mm, taking the frame's origin 63 mm. An alpha-beta tracker of the frame, axes and
-# origin (Benedict-Bordner: the gain of the turn and of the origin's step is PELVIS_GAIN^2 / (2 - PELVIS_GAIN)),
-# follows a steady motion without lag and takes PELVIS_GAIN of a one-frame slip: the changes of its turn are
-# half as large at the 95th percentile (dance1 1.26 -> 0.76 deg, dance2 2.52 -> 1.26, walk1 2.74 -> 1.17), and
-# its axes stay within 0.3 deg of the raw ones (median; 0.7-0.9 at the 95th percentile). Knee+ankle hidden
-# 0.1 s in every 0.5 s on dance1 (the blend at return going on with the output's own step, mocap_core.blend): the
-# largest move the fill adds at return 1.62x / 1.52x the normal step -> 1.47x / 1.38x with the axes tracked,
-# 1.33x / 1.38x with the origin too; at loss 1.46x -> 1.46x. The means within 0.8 mm on every dance-set leg,
-# short gaps and long. Gains of 0.5-0.7 did as well (the axes alone); 0.3 took the knee's loss to 1.64x.
+# The pelvis frame comes from three skin markers, whose shake turns it by 1.3-2.7 deg a frame (95th
+# percentile on the dance set; a degree is 8 mm at the knee) and whose slips move its origin (dance2's right
+# ASIS, 127 mm in a frame). An alpha-beta tracker of its axes and origin (Benedict-Bordner: the turn's and the
+# step's gain is PELVIS_GAIN^2 / (2 - PELVIS_GAIN)) follows a steady motion without lag and takes PELVIS_GAIN
+# of a one-frame slip: half the shake, within 0.3 deg of the raw axes (median).
 PELVIS_GAIN = 0.6
 PELVIS_TURN_GAIN = PELVIS_GAIN ** 2 / (2.0 - PELVIS_GAIN)
 PELVIS_RESET_RAD = 0.35  # 20 deg away from where the tracker expected it
 # The foot's line (its two toe markers, the profile's tracking markers of the foot: foot_line) turns the
 # ankle's offset from the toe: a remembered pose's foot may have pointed elsewhere with its toe in the same
-# place. Knee+ankle hidden 5-15 s (the walks from 2 s to the end), the ankle joint's mean: dance1 right
-# 26.6 -> 15.4 mm, dance2 left 53.8 -> 40.5, walk1 left 33.5 -> 26.3, better on all eight legs (the knees
-# within 3 mm either way; the sixteen means 661 -> 602). Tried: the knee's offset from the toe turned too
-# (786 mm), or shifted by 0.3 of the ankle's turn (594, but dance2 right's knee 35 -> 39); the foot's line in
-# the key (the ankle no better, the knee worse: dance1 left 25 -> 31 mm, prototype).
+# place (the ankle better on all eight dance-set legs; turning the knee's offset too made the knees worse).
 FOOT_WIDTH_TOLERANCE = 0.2  # the toe markers' spacing off its learned value by more than this share: not used
 FOOT_WIDTH_RATE = 1 / 100   # how fast the learned spacing follows the frames where the leg is seen whole
-# ... and used only once the spacing has held for this many frames (1/3 s at 60 Hz). Where dance1's left toe
-# markers come apart (6-14 s) they are right again for 3 frames at 6.05 s: the ankle turned with them and then,
-# the spacing gone, not, and at the return 0.1 s later it moved 2.11x its normal step (knee+ankle hidden 0.1 s
-# in every 0.5 s; 1.38x with the toe's line unused). Held 3 / 6 / 12 / 20 / 30 frames: 1.69 / 1.53 / 1.49 /
-# 1.47 / 1.43x; the sixteen long-gap means 598-602 mm throughout. (The tolerance 0.1 / 0.3 with 20 frames:
-# 622 / 598 mm, 1.43 / 1.49x.)
+# ... and used only once the spacing has held for this many frames (1/3 s at 60 Hz): dance1's left toe markers,
+# which come apart from 6 s to 14 s, are right again for 3 frames at 6.05 s, and turning the ankle with them
+# there took its move at a return 0.1 s later to 2.11x its normal step (1.47x with 20 frames).
 FOOT_SOUND_FRAMES = 20
-# The toe's velocity (in the pelvis frame) helps find the leg's poses. A walking toe passes each place twice a
-# step, forward in the swing and back (in the pelvis's frame) in the stance, with the knee bent differently each
-# time. A second search finds the poses by the toe's place and VELOCITY_S times its velocity (where it will be
-# VELOCITY_S from now; the velocity from one frame to the next), and the knee is the two searches' answers
-# weighted by how closely each one's poses agree (inverse variance): where the velocity tells nothing (a dancer
-# standing on one foot) its poses spread and the place's answer stays. Until stop 37 the ankle was found by the
-# place alone: with the velocity the walks' ankles got worse (walk2 right 24 -> 31 mm). With both searches'
-# poses fitted (LOCAL_FIT_RIDGE) and turned with the foot's line, the ankle is weighted as the knee is: the
-# sixteen means 514.7 -> 510.1 mm, six of the eight ankles better (dance2 left 38.8 -> 34.6, walk1 left 22.8
-# -> 19.9), walk1 right's 46.9 -> 50.6 and walk2 left's 25.6 -> 27.5 worse; short gaps unchanged (0.2 mm).
-# Knee+ankle hidden (joint level, studio options; the walks from 2 s to the end, the dances 5-15 s), the knee's
-# mean: walk1 left 42.8 -> 30.8 mm, right 56.1 -> 42.8, walk2 42.0 -> 39.6 and 45.5 -> 37.8, dance2 45.8 -> 42.3
-# and 34.3 -> 33.6, dance1 right 25.7 -> 23.2, left 29.8 -> 29.9; the ankles within 0.4 mm. The sixteen means
-# 602 -> 560 mm. VELOCITY_S 0.1 / 0.15 / 0.25 / 0.6 / 1.0: 570 / 564 / 561 / 561 / 562 (0.15 took dance1 left's
-# knee to 31.2 and dance2 right's to 34.9). The velocity search alone for the knee: 570 at 0.15 s (dance2 right's
-# knee 34 -> 38); smoothed over frames (gain 0.5): 567. The knee's largest added move at return on short gaps
-# (dance1, 0.1 s in every 0.5 s): 1.38x its normal step (1.36x before; 1.44x at 0.15 s, 1.52x with the velocity
-# search alone).
+# A walking toe passes each place twice a step, forward in the swing and back (in the pelvis's frame) in the
+# stance, with the knee bent differently each time. A second search finds the poses by the toe's place and
+# VELOCITY_S times its velocity (where it will be VELOCITY_S from now), and each target is the two searches'
+# answers weighted by how closely each one's poses agree (inverse variance): where the velocity tells nothing
+# (a dancer standing on one foot) its poses spread and the place's answer stays. walk1's knees 43 / 56 ->
+# 31 / 43 mm.
 VELOCITY_S = 0.4
-# The twenty poses found are not averaged but fitted (remembered_poses.local_fit): each target's offset as a
-# linear function of where the pose's toe was, read off where the toe is now. A fixed TOE_SHARE says how the
-# knee follows the toe everywhere; the fit learns it near the pose, where the knee may follow the toe one way
-# forward and another sideways. The fit's slope is pulled towards zero (the weighted mean) by LOCAL_FIT_RIDGE
-# against the poses' toes' spread (weighted, m^2): with the toes within a few cm of each other the mean stays.
-# Knee+ankle hidden (as above), stop 37: the sixteen means 526.0 -> 514.7 mm (walk2's knees 33.9 / 31.8 ->
-# 31.0 / 29.5, walk1 right's ankle 48.7 -> 46.9); 0.003 / 0.01: 514.4 / 516.5 (0.003 took walk1 right's knee
-# max to 150 mm). On short gaps (0.1 s in every 0.5 s) the largest added move at return stays within 1.41x
-# (dance1's knee).
+# The poses found are fitted, not averaged (remembered_poses.local_fit): each target's offset as a linear
+# function of where the pose's toe was, read off where the toe is now. At the edge of what the memory has seen
+# the poses lie to one side and their mean is off by however the knee follows the toe there. The slope is
+# pulled towards none (the weighted mean) by this ridge against the toes' weighted spread (m^2), so poses whose
+# toes lie within a few cm of each other keep their mean.
 LOCAL_FIT_RIDGE = 0.005
 MAX_STEP_S = 0.1  # frames further apart than this give no velocity (the last one is kept)
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
