@@ -4,7 +4,7 @@ The client is asyncio; it runs in a thread of its own and hands frames to the no
 so the node's loop (heartbeats, publishing) never waits on the network. Labels and rate come from
 the 3D and General parameters at every (re)connection; a label change publishes a new MarkerSet.
 When QTM goes away the thread reconnects with backoff (0.5 s doubling to 5 s) and says so; a
-connection that QTM never answers is given up after ``timeout_s``. A bad
+connection that QTM never answers is given up (and closed) after ``timeout_s``. A bad
 packet is counted and skipped; nothing from the network can stop the node.
 """
 from __future__ import annotations
@@ -104,12 +104,15 @@ class QtmIngest(Node):
         was_connected = False
         while not self.stopping.is_set():
             lost = asyncio.Event()
+            loop = _KeepsTransports(asyncio.get_running_loop())
             try:  # (qtm_rt waits for QTM's answer to its version command without a timeout of its own)
                 conn = await asyncio.wait_for(
-                    qtm_rt.connect(p.host, port=p.port, version=p.version, timeout=p.timeout_s,
+                    qtm_rt.connect(p.host, port=p.port, version=p.version, timeout=p.timeout_s, loop=loop,
                                    on_disconnect=lambda exc: lost.set(), on_event=self._on_event), p.timeout_s)
             except asyncio.TimeoutError:
                 conn = None
+                for transport in loop.transports:  # (else the connection given up on stays open)
+                    transport.close()
             if conn is None:
                 self.log.warning("QTM at %s:%d not reachable; retrying in %.1f s", p.host, p.port, backoff)
                 await self._sleep(backoff)
@@ -164,3 +167,19 @@ class QtmIngest(Node):
     def _on_event(self, event) -> None:
         name = getattr(event, "name", str(event))
         self.log.info("QTM event: %s", name)
+
+
+class _KeepsTransports:
+    """The running loop, keeping what ``qtm_rt.connect`` opens with it: a connect given up on leaves its
+    connection open otherwise, and qtm-rt hands back nothing to close it with."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop):
+        self._loop, self.transports = loop, []
+
+    def __getattr__(self, name):
+        return getattr(self._loop, name)
+
+    async def create_connection(self, *args, **kwargs):
+        transport, protocol = await self._loop.create_connection(*args, **kwargs)
+        self.transports.append(transport)
+        return transport, protocol

@@ -157,8 +157,8 @@ def test_ingest_node_survives_qtm_restarts(tmp_path):
 
 def test_ingest_node_gives_up_on_a_qtm_that_accepts_and_never_answers(tmp_path):
     """Something listens on QTM's port and says nothing (a QTM still starting, a wrong service): the client
-    waits for the answer to its version command with no timeout of its own. The node's connect times out,
-    and once the real QTM is there it streams."""
+    waits for the answer to its version command with no timeout of its own. The node's connect times out and
+    closes the connection it gave up on, and once the real QTM is there it streams."""
     port = free_port()
     out = tmp_path / "raw.csv"
     graph = _ingest_to_log(port, out, ", timeout_s: 1.0")
@@ -168,9 +168,15 @@ def test_ingest_node_gives_up_on_a_qtm_that_accepts_and_never_answers(tmp_path):
     silent.listen(8)
     with launched(tmp_path, graph) as g:
         try:
+            silent.settimeout(30)
             held, _ = silent.accept()  # the node's client connects, and hears nothing
         finally:
             silent.close()
+        held.settimeout(10)
+        received = b""
+        while chunk := held.recv(4096):  # its version command, then the close (a timeout here: left open)
+            received += chunk
+        assert b"version 1.25" in received, received
         with held, emulator(tmp_path, "--loop", port=port):
             wait_for(lambda: len(log_rows(out)) > 50, 30, "frames once QTM answers")
         assert g.proc.poll() is None and "not reachable; retrying" in g.log(), g.log()[-2000:]
