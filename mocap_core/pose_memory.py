@@ -63,9 +63,9 @@ NEIGHBOURS = 20     # remembered poses fitted (dance1: 10 gave the same error, 2
 # No own pose had the toe this near: the other leg's, mirrored, if one did. Decided by the toe's place alone;
 # the velocity's search then looks in the same memory (its own, larger distances fell back far too often).
 FALLBACK_M = 0.1
-# Per frame, how far the estimate moves towards the recalled answer, whose poses change as the toe moves:
-# a smaller share lags behind a walking knee, a larger one lets the recall's jumps through at a marker's return (0.7: 1.63x
-# the normal step on short gaps, against 1.44x here).
+# Per frame, how far the estimate moves towards the recalled answer, whose poses change as the toe moves: a
+# smaller share lags behind a walking knee, a larger one lets the recall's jumps through at a marker's return
+# (0.7: 1.63x the normal step on short gaps, against 1.44x here).
 SMOOTHING = 0.5
 # The pelvis frame comes from three skin markers, whose shake turns it by 1.3-2.7 deg a frame (95th
 # percentile on the dance set; a degree is 8 mm at the knee) and whose slips move its origin (dance2's right
