@@ -5,7 +5,9 @@ from mocap_core.experiments import gap_run
 from mocap_core.gapfill import BEYOND_THESIS
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.ik.kernels import rotation_vector, turned_by
-from mocap_core.pose_memory import LOCAL_FIT_RIDGE, NEIGHBOURS, PELVIS_GAIN, PoseMemory, pelvis_frame, track_pelvis
+from mocap_core.localization import hip_centres
+from mocap_core.pose_memory import (LOCAL_FIT_RIDGE, NEIGHBOURS, PELVIS_GAIN, PoseMemory, pelvis_frame, track_pelvis,
+                                   within_reach)
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
 from mocap_core.recordings import read_recording
 from mocap_core.remembered_poses import local_fit
@@ -169,6 +171,54 @@ def test_the_local_fit_reads_a_linear_leg_off_at_the_toe_known_answer():
                                atol=1e-12)
     np.testing.assert_allclose(local_fit(weights, np.zeros((NEIGHBOURS, 3)), found, LOCAL_FIT_RIDGE), averaged,
                                atol=1e-12)
+
+
+def test_an_ankle_out_of_reach_goes_to_the_nearest_point_within_it_known_answer():
+    """Beyond the leg's reach from the hip, a recalled ankle goes to the nearest point that is as far from the toe
+    as it was and at the reach from the hip (sampled: no point of that circle is nearer); within it, it stays."""
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        hip, toe = rng.normal(0, 0.3, 3), rng.normal(0, 0.3, 3)
+        ankle = toe + rng.normal(0, 1, 3) * 0.15
+        far = np.linalg.norm(ankle - hip)
+        np.testing.assert_array_equal(within_reach(ankle, toe, hip, far + 1e-6), ankle)
+        reach, radius = 0.9 * far, np.linalg.norm(ankle - toe)
+        if abs(np.linalg.norm(hip - toe) - radius) > reach:  # (the toe's sphere does not meet the reach)
+            continue
+        moved = within_reach(ankle, toe, hip, reach)
+        assert abs(np.linalg.norm(moved - hip) - reach) < 1e-9 and abs(np.linalg.norm(moved - toe) - radius) < 1e-9
+        axis = (hip - toe) / np.linalg.norm(hip - toe)  # the circle of such points: about the toe-hip line
+        centre = toe + ((moved - toe) @ axis) * axis
+        side = np.cross(axis, rng.normal(size=3))
+        side /= np.linalg.norm(side)
+        other, ring = np.cross(axis, side), np.linalg.norm(moved - centre)
+        circle = [centre + ring * (np.cos(a) * side + np.sin(a) * other) for a in np.linspace(0, 2 * np.pi, 720)]
+        assert np.linalg.norm(moved - ankle) <= min(np.linalg.norm(c - ankle) for c in circle) + 1e-9
+    toe, hip = np.zeros(3), np.array([0.0, 0.0, 1.0])  # too far for the ring: on the line towards the hip
+    np.testing.assert_allclose(within_reach(np.array([0.0, 0.0, -0.2]), toe, hip, 0.5), [0.0, 0.0, 0.2])
+
+
+def test_dance1s_recalled_ankle_stays_within_the_legs_reach():
+    """dance1's left leg reaches farther after 12.5 s than in the poses its memory has (the foot pointed where
+    they had it flat): the recalled ankle went 40-50 mm past the farthest any ankle had been from its hip (joints,
+    the second from 13 s). Now no recalled ankle is farther than that, and its error there is smaller."""
+    rec, prof = read_recording(data_file(DANCE), "dance1"), load_profile("dance28")
+    pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
+    lm, tracking = pipe.landmark_map.apply(rec.positions), pipe.landmark_map.tracking(rec.positions)
+    start, stop = int(5 * rec.rate_hz), int(15 * rec.rate_hz)
+    ankle, other = LANDMARK_INDEX["L_FAL"], LANDMARK_INDEX["R_FAL"]
+    hidden = lm.copy()
+    hidden[start:stop, [LANDMARK_INDEX["L_FLE"], ankle]] = np.nan
+    memory = PoseMemory(pipe.landmark_map.present(), pipe.landmark_map.tracking_of)
+    filled, mask = memory.fill_landmarks(hidden, None, tracking, np.arange(rec.n_frames) / rec.rate_hz)
+    assert mask[start:stop, ankle].all()
+    hips = [hip_centres(frame)[1:] for frame in lm]
+    left = np.array([np.linalg.norm(filled[f, ankle] - hips[f][0]) for f in range(rec.n_frames)])
+    right = np.array([np.linalg.norm(lm[f, other] - hips[f][1]) for f in range(rec.n_frames)])
+    for f in range(start, stop):  # within the farthest either ankle had been seen from its hip until then
+        assert left[f] <= max(np.nanmax(left[:start]), np.nanmax(right[:f])) + 1e-9, (f, left[f])
+    late = slice(int(13 * rec.rate_hz), int(14 * rec.rate_hz))
+    assert np.linalg.norm(filled[late, ankle] - lm[late, ankle], axis=1).mean() < 0.1
 
 
 FOOT = ("L_foot", "L_foot")  # the toe markers one by one: the tracking markers of the left foot
