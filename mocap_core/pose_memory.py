@@ -25,6 +25,9 @@ toe passes each place twice a step, in the swing and in the stance, with the kne
 (VELOCITY_S). walk1's knees 43 / 56 -> 31 / 43 mm. The poses found are fitted, not averaged: the targets'
 offsets as a linear function of the poses' toes, read off at the toe now (LOCAL_FIT_RIDGE).
 
+A recalled ankle is held within the leg's reach: no farther from the hip joint centre than either leg's
+ankle has been seen (after 12.5 s dance1's left leg stretches with the foot pointed, where its poses had it flat).
+
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 place of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
 leg what the other did before); the velocity's search then looks there too. Always pooled, they made
@@ -49,7 +52,8 @@ from mocap_core.remembered_poses import CAPACITY, keep, local_fit, nearest  # po
 
 POSE_MEMORY_HELP = ("beyond the thesis: lost knee and ankle landmarks put where the take's earlier poses with the "
                     "toe nearest where it is now had them (also by where the toe is going: the frames' "
-                    "times give its velocity), for marker sets with nothing else left on shank and foot")
+                    "times give its velocity), the ankle held within the leg's reach, for marker sets with nothing "
+                    "else left on shank and foot")
 KEY = "FM2"                             # the toe: every profile has it
 # The knee's and the ankle's landmarks, and how much of the toe's offset from the remembered poses'
 # toes each takes along (0: where the poses had it in the pelvis's frame; 1: as far from the toe as
