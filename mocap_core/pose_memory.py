@@ -106,6 +106,9 @@ LOCAL_FIT_RIDGE = 0.005
 # been from its hip joint centre goes, on its sphere about the toe, to that distance (the pose memory's poses
 # may have had the foot flat where it is now pointed, the toe as far as the leg goes). dance1 left at 13 s:
 # the recalled ankle 783 mm from the hip, where it never was over 748; its error 120 -> 89 mm.
+# ... learned so that one wrong frame cannot undo it: the reach grows by at most this a frame (a marker
+# swapped for one frame 1 m off would otherwise leave the ankle free for the rest of the take).
+REACH_GROWTH_M = 0.005
 MAX_STEP_S = 0.1  # frames further apart than this give no velocity (the last one is kept)
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
 L_TOE = LANDMARK_INDEX[f"L_{KEY}"]
@@ -309,6 +312,12 @@ def recall(keys, offsets, state, point, source, line, share, nt, width):
 
 
 @njit(cache=True)
+def grown_reach(reach, far):
+    """The reach learned so far, after a frame that had the ankle ``far`` from the hip (the first sets it)."""
+    return far if reach == 0.0 else max(reach, min(far, reach + REACH_GROWTH_M))
+
+
+@njit(cache=True)
 def within_reach(point, toe, hip, reach):
     """``point`` if it is within ``reach`` of ``hip``; else the nearest point to it as far from ``toe`` as it is
     and ``reach`` from ``hip`` (on the line from the toe towards the hip when none is)."""
@@ -369,9 +378,9 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
                 for t in range(nt):
                     if toe_share[g, t] == 1.0:  # (an ankle: how far the leg reaches, for either leg)
                         far = vnorm(lm[legs[g, 3 + t]] - hip)
-                        reach[g] = max(reach[g], far)
+                        reach[g] = grown_reach(reach[g], far)
                         if mirror[g] >= 0:
-                            reach[mirror[g]] = max(reach[mirror[g]], far)
+                            reach[mirror[g]] = grown_reach(reach[mirror[g]], far)
                 other = mirror[g]
                 if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
                     keep(keys[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],

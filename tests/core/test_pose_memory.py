@@ -221,6 +221,20 @@ def test_dance1s_recalled_ankle_stays_within_the_legs_reach():
     assert np.linalg.norm(filled[late, ankle] - lm[late, ankle], axis=1).mean() < 0.1
 
 
+def test_one_wrong_ankle_frame_does_not_undo_the_legs_reach():
+    """A marker swapped for one frame, 1 m off: the reach learned grows by a few mm, not to where it was."""
+    truth = _swinging_leg(400, 400)
+    ankle = LANDMARK_INDEX["L_FAL"]
+    farthest = max(np.linalg.norm(frame[ankle] - hip_centres(frame)[1]) for frame in truth)
+    glitch = truth.copy()
+    glitch[200, ankle] += [1.0, 0.0, 0.0]
+    memories = [PoseMemory(PRESENT), PoseMemory(PRESENT)]
+    for memory, frames in zip(memories, (truth, glitch)):
+        memory.fill_landmarks(frames)
+    assert abs(memories[0].reach[0] - farthest) < 1e-9
+    assert farthest < memories[1].reach[0] < farthest + 0.01, (memories[1].reach[0], farthest)
+
+
 FOOT = ("L_foot", "L_foot")  # the toe markers one by one: the tracking markers of the left foot
 
 
