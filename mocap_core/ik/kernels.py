@@ -181,17 +181,22 @@ def best_roll(pivot, line, points, targets, distances, price, max_roll, step):
 
 @njit(cache=True)
 def rigid_fit_first(before, after, n):
-    """(R, t) with R before[i] + t ~ after[i] for the first n rows, least squares (Kabsch; the kernel
-    twin of geometry.rigid_fit, unweighted)."""
+    """(R, t) with R before[i] + t ~ after[i] for the first n rows, least squares (Kabsch, unweighted)."""
+    return rigid_fit_weighted(before, after, np.ones(n), n)
+
+
+@njit(cache=True)
+def rigid_fit_weighted(before, after, weights, n):
+    """(R, t) minimising sum w[i] |R before[i] + t - after[i]|^2 over the first n rows (weighted Kabsch; the
+    kernel twin of geometry.rigid_fit)."""
+    w = weights[:n] / weights[:n].sum()
     cb, ca = np.zeros(3), np.zeros(3)
     for i in range(n):
-        cb += before[i]
-        ca += after[i]
-    cb /= n
-    ca /= n
+        cb += w[i] * before[i]
+        ca += w[i] * after[i]
     h = np.zeros((3, 3))
     for i in range(n):
-        h += np.outer(before[i] - cb, after[i] - ca)
+        h += w[i] * np.outer(before[i] - cb, after[i] - ca)
     u, _, vt = np.linalg.svd(h)
     rot = vt.T @ u.T
     if np.linalg.det(rot) < 0:  # a reflection: flip the weakest axis

