@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from mocap_core.analytic_fill import ESTIMATED, HELD, LOCATED, MISSING, all_finite, nearest_on_circle
-from mocap_core.ik.kernels import axis_angle, mm, rotation_vector, vnorm
+from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vnorm
 
 # A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.
 BLEND_X = 1.6783469900166612
@@ -277,15 +277,19 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # about the shoulder; its markers' straight course flies off the arm). Once one is lost it goes on
         # straight from where it is. Stop 30, short gaps: dance2's elbows 9.5 / 9.6 -> 7.3 / 7.1 mm. Neighbours out
         # of reach of those distances (skin that slid) leave a circle shrunk to a point on their line, which is not
-        # where the joint went: the course is pulled towards it by at most the step cap a frame (stop 35: the Vicon
-        # take's right upper arm stretched 233 -> 280 mm in 8 frames; lost for two, its shoulder's course jumped
-        # 36 mm onto that line, and its markers came back at 1.75x its own pace; 1.1x now)
+        # where the joint went (stop 35: the Vicon take's right upper arm stretched 233 -> 280 mm in 8 frames; lost
+        # for two, its shoulder's course jumped 36 mm onto that line). There the course moves with their line, as it
+        # lay against it the frame before (stop 39). Going on straight and pulled towards the line by at most the
+        # step cap, the Vicon take's kicking right foot, out of its ankle's and toe's reach for 9 frames as the kick
+        # turned back, ran 200 mm ahead and then fell onto the circle in one frame: its markers came back at up to
+        # 1.50x its own pace (1.15x now).
         if all_finite(course_len[k]) and all_finite(neighbours):
-            on = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0], course_len[k, 1])
-            pull = vnorm(on - course[k])
-            if vnorm(neighbours[1] - neighbours[0]) > course_len[k, 0] + course_len[k, 1] and pull > limit:
-                on = course[k] + (on - course[k]) * (limit / pull)
-            course[k] = on
+            if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
+                course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],
+                                              course_len[k, 1])
+            elif all_finite(last_out[k - 1]) and all_finite(last_out[k + 1]):
+                rot, shift = line_carry(last_out[k - 1], last_out[k + 1], neighbours[0], neighbours[1])
+                course[k] = mv(rot, course[k] - course_step[k]) + shift
         else:
             course_len[k] = np.nan
         w = course_weight(since_loss[k], trust[k])
@@ -356,8 +360,8 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
     then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
     hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones
-    keeps its distances to them, on their circle (stop 30); out of their reach, it is pulled towards their line
-    by no more than the step cap a frame (stop 35). While a fill stands in, the output stays within MAX_APART_M
+    keeps its distances to them, on their circle (stop 30); out of their reach, it moves with their line (stop
+    39). While a fill stands in, the output stays within MAX_APART_M
     of it (stop 31). A flickering marker swings the offset back and forth by the two sources' difference:
     nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and

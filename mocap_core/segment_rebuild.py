@@ -37,7 +37,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import (angle_about, axis_angle, best_roll, follow, mv, rigid_fit_weighted, rotation_between,
+from mocap_core.ik.kernels import (angle_about, axis_angle, best_roll, follow, line_carry, mv, rigid_fit_weighted,
                                    vfinite, vnorm)
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, TRACKING_BONES
 
@@ -275,13 +275,13 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
                 rot, t = rigid_fit_weighted(before, after, weights, n)
             elif n == MIN_SHAFT_PARTNERS and shaft == 1:
-                rot, t = _line_carry(before[0], before[1], after[0], after[1])
+                rot, t = line_carry(before[0], before[1], after[0], after[1])
                 forearm_roll = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen,
                                                                                               distance[s, k])
                 rolled = forearm_roll
             elif n >= 2 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k]):
                 i, j = _farthest(before, n)
-                rot, t = _line_carry(before[i], before[j], after[i], after[j])
+                rot, t = line_carry(before[i], before[j], after[i], after[j])
                 rolled = True
             else:
                 continue
@@ -296,13 +296,6 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             lm[seg[k]] = p
             last[s, k] = p
             rebuilt[seg[k]] = True
-
-
-@njit(cache=True)
-def _line_carry(before0, before1, after0, after1):
-    """The least rotation that turns the line between two points, and the shift that then puts their midpoint."""
-    rot = rotation_between(before1 - before0, after1 - after0)
-    return rot, 0.5 * (after0 + after1) - mv(rot, 0.5 * (before0 + before1))
 
 
 @njit(cache=True)

@@ -150,6 +150,14 @@ def rotation_between(a, b):
 
 
 @njit(cache=True)
+def line_carry(before0, before1, after0, after1):
+    """(R, t): the least rotation that turns the line between two points, and the shift that then puts their
+    midpoint (what two points tell of a rigid motion; the roll about their line is left as it was)."""
+    rot = rotation_between(before1 - before0, after1 - after0)
+    return rot, 0.5 * (after0 + after1) - mv(rot, 0.5 * (before0 + before1))
+
+
+@njit(cache=True)
 def best_roll(pivot, line, points, targets, distances, price, max_roll, step):
     """The turn about the line through ``pivot`` along the unit ``line`` that keeps ``points`` (n, 3) nearest
     their ``distances`` (n, m; NaN: unknown) from ``targets`` (m, 3; NaN: not seen), plus ``price`` per squared
