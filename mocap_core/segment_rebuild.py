@@ -37,8 +37,8 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from mocap_core.ik.kernels import (angle_about, axis_angle, best_roll, follow, line_carry, mv, rigid_fit_weighted,
-                                   vfinite, vnorm)
+from mocap_core.ik.kernels import (angle_about, axis_angle, best_roll, follow, line_carry, mv, nearness_weight,
+                                   rigid_fit_weighted, vfinite, vnorm)
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, TRACKING_BONES
 
 MIN_PARTNERS = 3
@@ -54,15 +54,12 @@ MIN_SHAFT_PARTNERS = 2
 # markers, say): they must spread at least this far (RMS) from their best line. (An elbow marker
 # with two wrist markers 6 cm apart spreads 7-9 mm: enough.)
 MIN_SPREAD_M = 0.005
-# Skin deforms a segment's markers more the farther apart they are (a forearm twists along its length), so in
-# the rigid fit each partner weighs by the inverse square of its distance from the member (in the reference;
-# no nearer than NEAR_FLOOR_M): the rotation's error then has a shorter lever. Elbow hidden from 1 s (studio
-# options, mean / max mm), unweighted -> weighted: CMU karate left 19.5 / 66.9 -> 18.6 / 63.2, right
-# 22.9 / 83.4 -> 22.0 / 78.6; the Vicon take's 116.8 -> 115.1 and 11.7 -> 11.3; the sprint's 11.2 / 30.7 and the
-# Qualisys walk's 3.3 / 6.4 -> 3.4 / 6.5 as good as the same. The walk's knee 11.0 / 23.5 -> 9.7 / 26.3. Power 3
-# or 4 gains under 1 mm more (karate left's max 62.4 / 62.0) and takes the walk's knee max to 27-28.
-NEARNESS_POWER = 2.0
-NEAR_FLOOR_M = 0.02
+# In the rigid fit each partner weighs by its nearness to the member in the reference (kernels.nearness_weight).
+# Elbow hidden from 1 s (studio options, mean / max mm), unweighted -> weighted: CMU karate left 19.5 / 66.9 ->
+# 18.6 / 63.2, right 22.9 / 83.4 -> 22.0 / 78.6; the Vicon take's 115.9 -> 115.2 and 11.7 -> 11.3; the sprint's
+# 11.2 / 30.7 and the Qualisys walk's 3.3 / 6.4 -> 3.4 / 6.5 as good as the same. The walk's knee 11.0 / 23.5 ->
+# 9.7 / 26.3. The inverse cube or fourth power gains under 1 mm more (karate left's max 62.4 / 62.0) and takes the
+# walk's knee max to 27-28.
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
                 "tracking markers), or of 2 along the bone (a tracking marker and a landmark; a forearm's rolled "
@@ -265,7 +262,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             for m in range(rigid):
                 if seen[m] and vfinite(reference[s, k, m]):
                     before[n], after[n] = reference[s, k, m], lm[seg[m]]
-                    weights[n] = max(vnorm(reference[s, k, m] - reference[s, k, k]), NEAR_FLOOR_M) ** -NEARNESS_POWER
+                    weights[n] = nearness_weight(vnorm(reference[s, k, m] - reference[s, k, k]))
                     n += 1
                     if seg[m] >= N_LANDMARKS:
                         shaft += 1

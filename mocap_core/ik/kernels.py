@@ -187,6 +187,19 @@ def best_roll(pivot, line, points, targets, distances, price, max_roll, step):
     return best
 
 
+# Skin deforms a body's markers more the farther apart they are (a forearm twists along its length), so a rigid
+# fit made to carry one point weighs each partner by the inverse square of its distance from that point, no
+# nearer than NEAR_FLOOR_M: the rotation's error then has a shorter lever (segment_rebuild and partial_means give
+# what it changed).
+NEAR_FLOOR_M = 0.02
+
+
+@njit(cache=True)
+def nearness_weight(distance):
+    """A partner's weight in a rigid fit that carries a point ``distance`` metres from it."""
+    return 1.0 / max(distance, NEAR_FLOOR_M) ** 2
+
+
 @njit(cache=True)
 def rigid_fit_first(before, after, n):
     """(R, t) with R before[i] + t ~ after[i] for the first n rows, least squares (Kabsch, unweighted)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocap_core.experiments import _turns_deg
+from mocap_core.geometry import rigid_fit
 from mocap_core.ik.kernels import axis_angle
 from mocap_core.partial_means import PartialMeans
 from mocap_core.pipeline import SkeletonPipeline
@@ -41,6 +42,28 @@ def test_a_lost_member_moves_with_the_markers_nearest_it_known_answer():
         filled = means.fill(seen, landmarks)
         assert filled[SAE] == (f > 0)
         np.testing.assert_allclose(landmarks[SAE], 0.5 * (markers[0] + markers[1]), atol=1e-9)
+
+
+def test_the_turn_leans_on_the_markers_nearest_the_lost_one_known_answer():
+    """Skin moves far markers more: the four nearest markers' turn is their Kabsch fit with each weighted by the
+    inverse square of its distance from the lost member (geometry.rigid_fit). One of them slides 20 mm: the lost
+    back marker keeps its offset from the front one turned by that fit, to 1e-9 m."""
+    means = PartialMeans(_shoulder_map())
+    means.fill(BODY.copy(), _shoulder_map().apply(BODY))
+    turn = axis_angle(np.array([0.0, 0.6, 0.8]), np.radians(40.0))
+    moved = BODY @ turn.T + np.array([0.2, 0.1, 0.0])
+    moved[5] += [0.02, 0.0, 0.0]  # slid
+    seen = moved.copy()
+    seen[1] = np.nan
+    landmarks = _shoulder_map().apply(seen)
+    means.fill(seen, landmarks)
+    distance = np.linalg.norm(BODY - BODY[1], axis=1)
+    nearest = [i for i in np.argsort(distance) if i != 1][:4]
+    rot, _ = rigid_fit(BODY[nearest], moved[nearest], 1 / distance[nearest] ** 2)
+    back = moved[0] + rot @ (BODY[1] - BODY[0])
+    np.testing.assert_allclose(landmarks[SAE], 0.5 * (moved[0] + back), atol=1e-9)
+    unweighted, _ = rigid_fit(BODY[nearest], moved[nearest], np.ones(4))
+    assert np.linalg.norm(rot - unweighted) > 1e-3  # (the weights matter here)
 
 
 def test_with_fewer_than_three_near_markers_seen_the_last_turn_is_kept():
