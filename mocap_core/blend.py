@@ -361,9 +361,8 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
     hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones
     keeps its distances to them, on their circle (stop 30); out of their reach, it moves with their line (stop
-    39). While a fill stands in, the output stays within MAX_APART_M
-    of it (stop 31). A flickering marker swings the offset back and forth by the two sources' difference:
-    nothing builds up.
+    39). While a fill stands in, the output stays within MAX_APART_M of it (stop 31). A flickering marker swings
+    the offset back and forth by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
