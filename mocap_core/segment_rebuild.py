@@ -138,17 +138,28 @@ ROLL_PRICE = 0.001
 # before: right 13.8 / 120 (the wrong mirror from 8.55 s). The shank rolled so too: the Vicon legs' knees
 # 22 / 28 -> 28 / 50 mm. A lower price for this roll (0.0001): the right elbow 12.1 / 53, the left's max 258.
 ROLLS_ABOUT_SHAFT = ("forearm",)
+# Two partners whose spacing bone fixes: the styloids sit on the ends of the radius and the ulna, which the distal
+# radio-ulnar joint holds together (pronation turns them together), the malleoli on the tibia and the fibula. When
+# their spacing has changed by over SLID_M since the member's reference, one of them has slid on the skin (or was
+# put off by the cameras), and the one whose distances to the segment's other seen partners changed more is left
+# out of the fit. While that cannot be told (the other partners lost, or the pair not both seen) the last verdict
+# stands. The Vicon take's inner wrist marker slides 30-50 mm up the forearm after 1.5 s, the pair's spacing
+# changing by only 7-9 mm; left elbow hidden from 1 s, its epicondyles' landmarks were 55 / 175 mm off on
+# average, 30 / 28 with it left out.
+BONY_PAIRS = {"forearm": ("RSP", "USP"), "shank": ("FAL", "TAM")}
+SLID_M = 0.005
 N_LANDMARKS = len(LANDMARKS)
 
 
 def segment_table(tracking_of: Sequence[str] = ()
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Point indices per segment (segments x width; the rebuilt members first, then the partners and the
     bone's tracking markers, then the points used for distances only; -1 padding), and per segment how
     many are rebuilt, how many move rigidly with it, how many of the first are refined by distances, from
-    which point on the tracking markers hold those distances firmly (0: the bone's own too), and whether it
-    rolls about its shaft (ROLLS_ABOUT_SHAFT). Points are the landmarks, then the tracking markers
-    (``tracking_of``: the segment of each, e.g. "L_forearm")."""
+    which point on the tracking markers hold those distances firmly (0: the bone's own too), whether it
+    rolls about its shaft (ROLLS_ABOUT_SHAFT), and where in its row its bony pair is (BONY_PAIRS; -1: none).
+    Points are the landmarks, then the tracking markers (``tracking_of``: the segment of each, e.g.
+    "L_forearm")."""
     def tracks(name):
         return [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == name]
 
@@ -159,7 +170,7 @@ def segment_table(tracking_of: Sequence[str] = ()
             return LANDMARK_INDEX[f"{'R' if side == 'L' else 'L'}_{name.removeprefix('other ')}"]
         return LANDMARK_INDEX[f"{side}_{name}"]
 
-    rows, counts = [], []
+    rows, counts, pairs = [], [], []
     for side in ("L", "R"):
         for bone, rebuilt, partners in SEGMENTS:
             rigid = [landmark(side, name) for name in rebuilt + partners] + tracks(f"{side}_{bone}")
@@ -169,10 +180,12 @@ def segment_table(tracking_of: Sequence[str] = ()
             rows.append(rigid + distance_only)
             counts.append((len(rebuilt), len(rigid), len(refined) if distance_only else 0,
                            0 if own_too else len(rigid), bone in ROLLS_ABOUT_SHAFT))
+            pair = BONY_PAIRS.get(bone)
+            pairs.append([(rebuilt + partners).index(name) for name in pair] if pair else [-1, -1])
     width = max(map(len, rows))
     table = np.array([r + [-1] * (width - len(r)) for r in rows], np.int64)
     rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls = (np.array(c, np.int64) for c in zip(*counts))
-    return table, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls
+    return table, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, np.array(pairs, np.int64)
 
 
 class SegmentRebuilder:
@@ -181,7 +194,7 @@ class SegmentRebuilder:
 
     def __init__(self, tracking_of: Sequence[str] = ()):
         (self.segments, self.rebuilt_count, self.rigid_count, self.refined_count,
-         self.held_from, self.shaft_rolls) = segment_table(tracking_of)
+         self.held_from, self.shaft_rolls, self.pairs) = segment_table(tracking_of)
         self.n_tracking = len(tracking_of)
         width = self.segments.shape[1]
         # per segment and member: where the segment's markers were the last time that member was
@@ -191,6 +204,8 @@ class SegmentRebuilder:
         self.distance = np.full((len(self.segments), width, width), np.nan)
         # per segment and member: its point in the frame before, seen or rebuilt (NaN: neither)
         self.last = np.full((len(self.segments), width, 3), np.nan)
+        # per segment and member: which of the bony pair was last found slid against its reference (-1: neither)
+        self.slid = np.full((len(self.segments), width), -1, np.int64)
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost, and of the tracking markers
@@ -203,7 +218,7 @@ class SegmentRebuilder:
             points = np.concatenate([landmarks, tracking])
         rebuilt = np.zeros(len(points), np.bool_)
         rebuild_frame(points, self.segments, self.rebuilt_count, self.rigid_count, self.refined_count, self.held_from,
-                      self.shaft_rolls, self.reference, self.distance, self.last, rebuilt)
+                      self.shaft_rolls, self.pairs, self.reference, self.distance, self.last, self.slid, rebuilt)
         if points is not landmarks:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
@@ -220,8 +235,8 @@ class SegmentRebuilder:
 
 
 @njit(cache=True)
-def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, reference, distance,
-                  last, rebuilt):
+def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, reference,
+                  distance, last, slid, rebuilt):
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
     weights = np.empty(segments.shape[1])
@@ -248,6 +263,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
         if count > MIN_SHAFT_PARTNERS:
             for k in range(rigid):
                 if seen[k] and count - 1 >= _partners(reference[s, k], k, rigid):
+                    slid[s, k] = -1
                     for m in range(rigid):
                         if seen[m]:
                             reference[s, k, m] = lm[seg[m]]
@@ -258,9 +274,10 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
         for k in range(rebuilt_count[s]):
             if seen[k] or rebuilt[seg[k]] or not vfinite(reference[s, k, k]):
                 continue
+            slid[s, k] = _slid(lm, seg, rigid, seen, reference[s, k], pairs[s, 0], pairs[s, 1], slid[s, k])
             n, shaft = 0, 0
             for m in range(rigid):
-                if seen[m] and vfinite(reference[s, k, m]):
+                if m != slid[s, k] and seen[m] and vfinite(reference[s, k, m]):
                     before[n], after[n] = reference[s, k, m], lm[seg[m]]
                     weights[n] = nearness_weight(vnorm(reference[s, k, m] - reference[s, k, k]))
                     n += 1
@@ -293,6 +310,27 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             lm[seg[k]] = p
             last[s, k] = p
             rebuilt[seg[k]] = True
+
+
+@njit(cache=True)
+def _slid(lm, seg, rigid, seen, reference, i, j, before):
+    """Which of the bony pair at positions i, j (-1: none) has slid since ``reference``, the member's (BONY_PAIRS):
+    -1 while their spacing holds, ``before`` (the last verdict) where it cannot be told."""
+    if i < 0 or not (vfinite(reference[i]) and vfinite(reference[j])):
+        return -1
+    if not (seen[i] and seen[j]):
+        return before
+    if abs(vnorm(lm[seg[i]] - lm[seg[j]]) - vnorm(reference[i] - reference[j])) <= SLID_M:
+        return -1
+    moved_i, moved_j, others = 0.0, 0.0, 0
+    for m in range(rigid):
+        if m != i and m != j and seen[m] and vfinite(reference[m]):
+            moved_i = max(moved_i, abs(vnorm(lm[seg[i]] - lm[seg[m]]) - vnorm(reference[i] - reference[m])))
+            moved_j = max(moved_j, abs(vnorm(lm[seg[j]] - lm[seg[m]]) - vnorm(reference[j] - reference[m])))
+            others += 1
+    if others == 0:
+        return before
+    return i if moved_i > moved_j else j
 
 
 @njit(cache=True)
