@@ -105,7 +105,7 @@ def test_a_styloid_that_slid_is_left_out_of_the_fit_known_answer():
     assert np.linalg.norm(rot @ first[hle] + t - moved[hle]) > 0.005  # what the slid marker would have done
 
 
-def test_a_slid_styloid_stays_out_while_no_other_partner_can_tell():
+def test_a_slid_styloid_stays_out_while_its_pair_is_lost():
     """The frame after, the radial styloid is lost and the olecranon seen again: the pair's spacing cannot be
     measured, and the last verdict stands. The ulnar styloid, still seen, is left out as if it were lost, and the
     olecranon and the forearm's markers carry the elbow exactly."""
