@@ -61,14 +61,14 @@ MIN_SPREAD_M = 0.005
 # 9.7 / 26.3. The inverse cube or fourth power gains under 1 mm more (karate left's max 62.4 / 62.0) and takes the
 # walk's knee max to 27-28.
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
-                "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's "
-                "tracking markers), or of 2 along the bone (a tracking marker and a landmark; a forearm's rolled "
-                "by the upper arm's), or of markers on one line rolled by the bone above's; elbow, knee and ankle "
-                "held to the upper arm's, thigh's and shank's markers; then a lost knee and ankle from the hip and "
-                "one shank marker, or the ankle (the leg hinge), which also turns a knee rebuilt from 2 to keep its "
-                "distances from the hip; a lost acromion carried with the trunk's markers; and a landmark that is "
-                "the mean of several markers, still lost, kept while some are seen (a lost one keeps its offset, "
-                "turned as the markers nearest it turn)")
+                "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's tracking "
+                "markers; of the styloids or malleoli, one that slid on the skin left out), or of 2 along the bone (a"
+                " tracking marker and a landmark; a forearm's rolled by the upper arm's), or of markers on one line "
+                "rolled by the bone above's; elbow, knee and ankle held to the upper arm's, thigh's and shank's "
+                "markers; then a lost knee and ankle from the hip and one shank marker, or the ankle (the leg hinge),"
+                " which also turns a knee rebuilt from 2 to keep its distances from the hip; a lost acromion carried "
+                "with the trunk's markers; and a landmark that is the mean of several markers, still lost, kept while"
+                " some are seen (a lost one keeps its offset, turned as the markers nearest it turn)")
 # Rigid bodies of landmarks: (bone, rebuilt when lost, partners only), in the order they are rebuilt:
 # the shank's partners include the malleoli the foot may have rebuilt just before. The profile's
 # tracking markers of a bone (wands, clusters) join it as partners. The styloids only help: rebuilt
