@@ -320,17 +320,23 @@ def _slid(lm, seg, rigid, seen, reference, i, j, before):
         return -1
     if not (seen[i] and seen[j]):
         return before
-    if abs(vnorm(lm[seg[i]] - lm[seg[j]]) - vnorm(reference[i] - reference[j])) <= SLID_M:
+    if _stretch(lm, seg, reference, i, j) <= SLID_M:
         return -1
     moved_i, moved_j, others = 0.0, 0.0, 0
     for m in range(rigid):
         if m != i and m != j and seen[m] and vfinite(reference[m]):
-            moved_i = max(moved_i, abs(vnorm(lm[seg[i]] - lm[seg[m]]) - vnorm(reference[i] - reference[m])))
-            moved_j = max(moved_j, abs(vnorm(lm[seg[j]] - lm[seg[m]]) - vnorm(reference[j] - reference[m])))
+            moved_i = max(moved_i, _stretch(lm, seg, reference, i, m))
+            moved_j = max(moved_j, _stretch(lm, seg, reference, j, m))
             others += 1
     if others == 0:
         return before
     return i if moved_i > moved_j else j
+
+
+@njit(cache=True)
+def _stretch(lm, seg, reference, a, b):
+    """How far the distance between points a and b of a segment's row has changed since ``reference``."""
+    return abs(vnorm(lm[seg[a]] - lm[seg[b]]) - vnorm(reference[a] - reference[b]))
 
 
 @njit(cache=True)
