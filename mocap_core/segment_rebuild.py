@@ -138,6 +138,20 @@ ROLL_PRICE = 0.001
 # before: right 13.8 / 120 (the wrong mirror from 8.55 s). The shank rolled so too: the Vicon legs' knees
 # 22 / 28 -> 28 / 50 mm. A lower price for this roll (0.0001): the right elbow 12.1 / 53, the left's max 258.
 ROLLS_ABOUT_SHAFT = ("forearm",)
+# Where three or more partners are left, the rigid fit carries the forearm's roll from its wrist markers. But skin
+# and a wrist bar turn with pronation, the ulna and the epicondyles do not: on the CMU karate take the lateral
+# epicondyle's marker keeps its distances to the forearm's and the upper arm's markers within 4 mm (SD), to the two
+# wrist markers only within 12-19 mm. So a forearm's member is also rolled about the forearm's line (the styloids'
+# mean to its tracking markers' mean) to keep its distances to the upper arm's markers, as a member with two
+# partners is. That roll is only as firm as those distances change with it: taken in full where they change by
+# ROLL_FIRM_FULL (metres per radian) or more, not where by ROLL_FIRM_FROM or less (an arm held straight puts the
+# upper arm's marker near the forearm's line), blended in between with the fit kept to its distances. Elbow hidden
+# from 1 s (studio options, prototype harness), mean / max: karate left 18.9 / 63.2 -> 18.0 / 59.0 mm, right
+# 22.0 / 71.2 -> 19.5 / 60.7, karate on short gaps 8.7 / 79.9 -> 7.1 / 59.2; the Vicon right 11.3 -> 10.5; the
+# Qualisys walk 3.4 / 6.5 -> 4.9 / 10.0. Rolled in full wherever the upper arm is seen: karate 23.3 and 23.0 mm
+# (its arms straight in 1-4 s, 5-12 -> 14-34 mm); rolled, then kept to the distances: 21.7 / 73.9 and 28.0 / 77.7.
+ROLL_FIRM_FROM = 0.02
+ROLL_FIRM_FULL = 0.08
 # Two partners whose spacing bone fixes: the styloids sit on the ends of the radius and the ulna, which the distal
 # radio-ulnar joint holds together (pronation turns them together), the malleoli on the tibia and the fibula. When
 # their spacing has changed by over SLID_M since the member's reference, one of them has slid on the skin (or was
@@ -285,9 +299,11 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                         shaft += 1
             # (rolled: carried by partners i and j's line, then about it by the bone above; forearm_roll: from the
             # member's side of that line in the frame before, see ROLLS_ABOUT_SHAFT)
-            rolled, forearm_roll, i, j = False, False, 0, 1
+            rolled, forearm_roll, fitted_roll, i, j = False, False, False, 0, 1
             if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
                 rot, t = rigid_fit_weighted(before, after, weights, n)
+                fitted_roll = (shaft_rolls[s] == 1 and k < refined_count[s] and 0 < shaft < n
+                               and _above_seen(rigid, width, seen, distance[s, k]))
             elif n == MIN_SHAFT_PARTNERS and shaft == 1:
                 rot, t = line_carry(before[0], before[1], after[0], after[1])
                 forearm_roll = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen,
@@ -305,8 +321,16 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             if rolled:
                 p = _roll_by_above(p, after[i], after[j], lm, seg, rigid, width, seen, distance[s, k], point, above)
             elif k < refined_count[s]:
-                p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, -1)
-                p = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR, held_from[s])
+                kept = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, -1)
+                kept = _keep_distances(kept, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR, held_from[s])
+                if fitted_roll:  # (ROLL_FIRM_FROM)
+                    pivot, toward = _shaft_line(lm, seg, rigid, seen, reference[s, k], slid[s, k])
+                    firm = _roll_firmness(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k])
+                    if firm > 0.0:
+                        rolled_p = _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k],
+                                                  point, above)
+                        kept = firm * rolled_p + (1.0 - firm) * kept
+                p = kept
             lm[seg[k]] = p
             last[s, k] = p
             rebuilt[seg[k]] = True
@@ -359,6 +383,34 @@ def _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance, poin
     angle = best_roll(pivot, line, point, above[:width - rigid], distance[rigid:width].reshape(1, width - rigid),
                       ROLL_PRICE, MAX_ROLL, ROLL_STEP)
     return pivot + mv(axis_angle(line, angle), p - pivot)
+
+
+@njit(cache=True)
+def _shaft_line(lm, seg, rigid, seen, reference, slid):
+    """The forearm's line among a member's seen partners (a slid one left out): from the mean of the landmarks (the
+    styloids) to the mean of the tracking markers (on the shaft)."""
+    ends, counts = np.zeros((2, 3)), np.zeros(2)
+    for m in range(rigid):
+        if m != slid and seen[m] and vfinite(reference[m]):
+            end = 1 if seg[m] >= N_LANDMARKS else 0
+            ends[end] += lm[seg[m]]
+            counts[end] += 1
+    return ends[0] / counts[0], ends[1] / counts[1]
+
+
+@njit(cache=True)
+def _roll_firmness(p, pivot, toward, lm, seg, rigid, width, seen, distance):
+    """How far to trust a roll of ``p`` about the line from ``pivot`` toward ``toward`` by the bone above's
+    tracking markers (0-1): by how fast its distance to them changes with the roll, metres per radian, at best
+    (ROLL_FIRM_FROM, ROLL_FIRM_FULL)."""
+    line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
+    across = np.cross(line, p - pivot)  # p's velocity per radian of roll
+    rate = 0.0
+    for m in range(rigid, width):
+        if seen[m] and not np.isnan(distance[m]):
+            u = p - lm[seg[m]]
+            rate = max(rate, abs((across * u).sum()) / max(vnorm(u), 1e-9))
+    return min(1.0, max(0.0, (rate - ROLL_FIRM_FROM) / (ROLL_FIRM_FULL - ROLL_FIRM_FROM)))
 
 
 @njit(cache=True)
