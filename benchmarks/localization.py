@@ -60,9 +60,17 @@ def main():
 
 
 def rebuild_cost():
-    """The segment rebuild on the sprint (59 markers): nothing lost, one elbow rebuilt and refined."""
-    rec = read_recording(DATA / "03_sprint_start_BTK_SprintMotion.trc")
-    lmap = load_profile("btk_sprint").resolve(rec.labels)
+    """The segment rebuild: nothing lost, one elbow rebuilt and refined. On the sprint (59 markers) from the
+    olecranon and the styloids; on karate (41) from the wrist bar and the forearm's marker, then rolled by the upper
+    arm's (ROLL_FIRM_FROM)."""
+    for file, profile, name in [("03_sprint_start_BTK_SprintMotion.trc", "btk_sprint", "sprint"),
+                                ("08_cmu_135_02_karate_kata.c3d", "cmu41", "karate")]:
+        _rebuild_cost(file, profile, name)
+
+
+def _rebuild_cost(file, profile, name):
+    rec = read_recording(DATA / file)
+    lmap = load_profile(profile).resolve(rec.labels)
     lm, tracking = lmap.apply(rec.positions[:600]).astype(np.float64), lmap.tracking(rec.positions[:600])
     rebuilder = SegmentRebuilder(lmap.tracking_of)
     for f in range(300):  # learn the references and distances
@@ -71,7 +79,7 @@ def rebuild_cost():
     lost[:, [LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]]] = np.nan
     seen = per_call_us(lambda i: rebuilder.fill(lm[300 + i].copy(), tracking[300 + i]), 300)
     elbow = per_call_us(lambda i: rebuilder.fill(lost[300 + i].copy(), tracking[300 + i]), 300)
-    print(f"segment rebuild (sprint), us per frame: nothing lost {seen:.1f}, one elbow rebuilt {elbow:.1f}")
+    print(f"segment rebuild ({name}), us per frame: nothing lost {seen:.1f}, one elbow rebuilt {elbow:.1f}")
 
 
 def leg_hinge_cost():
