@@ -62,7 +62,8 @@ MIN_SPREAD_M = 0.005
 # walk's knee max to 27-28.
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's tracking "
-                "markers; of the styloids or malleoli, one that slid on the skin left out), or of 2 along the bone (a"
+                "markers; of the styloids or malleoli, one that slid on the skin left out; a forearm's roll also "
+                "from the upper arm's, as far as they fix it), or of 2 along the bone (a"
                 " tracking marker and a landmark; a forearm's rolled by the upper arm's), or of markers on one line "
                 "rolled by the bone above's; elbow, knee and ankle held to the upper arm's, thigh's and shank's "
                 "markers; then a lost knee and ankle from the hip and one shank marker, or the ankle (the leg hinge),"
