@@ -145,12 +145,13 @@ ROLLS_ABOUT_SHAFT = ("forearm",)
 # wrist markers only within 12-19 mm. So a forearm's member is also rolled about the forearm's line (the styloids'
 # mean to its tracking markers' mean) to keep its distances to the upper arm's markers, as a member with two
 # partners is. That roll is only as firm as those distances change with it: taken in full where they change by
-# ROLL_FIRM_FULL (metres per radian) or more, not where by ROLL_FIRM_FROM or less (an arm held straight puts the
-# upper arm's marker near the forearm's line), blended in between with the fit kept to its distances. Elbow hidden
-# from 1 s (studio options, prototype harness), mean / max: karate left 18.9 / 63.2 -> 18.0 / 59.0 mm, right
-# 22.0 / 71.2 -> 19.5 / 60.7, karate on short gaps 8.7 / 79.9 -> 7.1 / 59.2; the Vicon right 11.3 -> 10.5; the
-# Qualisys walk 3.4 / 6.5 -> 4.9 / 10.0. Rolled in full wherever the upper arm is seen: karate 23.3 and 23.0 mm
-# (its arms straight in 1-4 s, 5-12 -> 14-34 mm); rolled, then kept to the distances: 21.7 / 73.9 and 28.0 / 77.7.
+# ROLL_FIRM_FULL (metres per radian) or more, not where by ROLL_FIRM_FROM or less (with the arm held straight the
+# upper arm's marker lies nearly along the forearm's line as seen from the elbow), blended in between with the fit
+# kept to its distances. Elbow hidden from 1 s (studio options), mean / max: karate left 18.9 / 63.2 -> 18.0 / 59.0
+# mm, right 22.0 / 71.2 -> 19.5 / 60.7, karate on short gaps 8.7 / 79.9 -> 7.1 / 59.2; the Vicon right 11.3 ->
+# 10.5; the Qualisys walk 3.4 / 6.5 -> 4.9 / 10.0. Rolled in full wherever the upper arm is seen: karate 23.3 and
+# 23.0 mm (its arms straight in 1-4 s, 5-12 -> 14-34 mm); rolled, then kept to the distances: 21.7 / 73.9 and
+# 28.0 / 77.7.
 ROLL_FIRM_FROM = 0.02
 ROLL_FIRM_FULL = 0.08
 # Two partners whose spacing bone fixes: the styloids sit on the ends of the radius and the ulna, which the distal
