@@ -256,6 +256,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
     weights = np.empty(segments.shape[1])
+    on_shaft = np.zeros(segments.shape[1], np.bool_)  # which gathered partners are tracking markers
     point, above = np.empty((1, 3)), np.empty((segments.shape[1], 3))
     previous = np.empty((segments.shape[1], 3))  # each member in the frame before
     for s in range(segments.shape[0]):
@@ -296,9 +297,10 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                 if m != slid[s, k] and seen[m] and vfinite(reference[s, k, m]):
                     before[n], after[n] = reference[s, k, m], lm[seg[m]]
                     weights[n] = nearness_weight(vnorm(reference[s, k, m] - reference[s, k, k]))
-                    n += 1
-                    if seg[m] >= N_LANDMARKS:
+                    on_shaft[n] = seg[m] >= N_LANDMARKS
+                    if on_shaft[n]:
                         shaft += 1
+                    n += 1
             # (rolled: carried by partners i and j's line, then about it by the bone above; forearm_roll: from the
             # member's side of that line in the frame before, see ROLLS_ABOUT_SHAFT)
             rolled, forearm_roll, fitted_roll, i, j = False, False, False, 0, 1
@@ -323,16 +325,19 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
             if rolled:
                 p = _roll_by_above(p, after[i], after[j], lm, seg, rigid, width, seen, distance[s, k], point, above)
             elif k < refined_count[s]:
-                kept = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, -1)
-                kept = _keep_distances(kept, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR, held_from[s])
+                firm, rolled_p = 0.0, p
                 if fitted_roll:  # (ROLL_FIRM_FROM)
-                    pivot, toward = _shaft_line(lm, seg, rigid, seen, reference[s, k], slid[s, k])
+                    pivot, toward = _shaft_line(after, on_shaft, n)
                     firm = _roll_firmness(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k])
                     if firm > 0.0:
                         rolled_p = _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k],
                                                   point, above)
-                        kept = firm * rolled_p + (1.0 - firm) * kept
-                p = kept
+                kept = rolled_p
+                if firm < 1.0:
+                    kept = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, -1)
+                    kept = _keep_distances(kept, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR,
+                                           held_from[s])
+                p = firm * rolled_p + (1.0 - firm) * kept
             lm[seg[k]] = p
             last[s, k] = p
             rebuilt[seg[k]] = True
@@ -388,15 +393,14 @@ def _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance, poin
 
 
 @njit(cache=True)
-def _shaft_line(lm, seg, rigid, seen, reference, slid):
-    """The forearm's line among a member's seen partners (a slid one left out): from the mean of the landmarks (the
-    styloids) to the mean of the tracking markers (on the shaft)."""
+def _shaft_line(partners, on_shaft, n):
+    """The forearm's line among the first n of a member's gathered partners: from the mean of the landmarks (the
+    styloids) to the mean of the tracking markers (``on_shaft``)."""
     ends, counts = np.zeros((2, 3)), np.zeros(2)
-    for m in range(rigid):
-        if m != slid and seen[m] and vfinite(reference[m]):
-            end = 1 if seg[m] >= N_LANDMARKS else 0
-            ends[end] += lm[seg[m]]
-            counts[end] += 1
+    for m in range(n):
+        end = 1 if on_shaft[m] else 0
+        ends[end] += partners[m]
+        counts[end] += 1
     return ends[0] / counts[0], ends[1] / counts[1]
 
 
