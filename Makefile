@@ -57,7 +57,7 @@ results-blend: $(STAMP)
 # The gap-filling options beyond the thesis that the studio graphs use (gapfill.BEYOND_THESIS), as flags of
 # `mocap eval gaps`, with constraints on and the markers removed; a run adds its landmark fills
 # (--rebuild, --pose-memory).
-GAPS_OPTIONS := --constraints on --mode markers --swivel --segment-carry --limb-memory --learned-lengths --body-model \
+GAPS_OPTIONS := --constraints on --mode markers --pair-guard --swivel --segment-carry --limb-memory --learned-lengths --body-model \
 	--reacquire-step 0.01
 GAPS_BEYOND_NO_BLEND := $(GAPS_OPTIONS) --end-model
 GAPS_BEYOND := $(GAPS_BEYOND_NO_BLEND) --blend-half-life 0.1

@@ -18,6 +18,7 @@ from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
+from mocap_core.pair_guard import PAIR_GUARD_HELP
 from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.partial_means import PartialMeans
 from mocap_core.segment_rebuild import REBUILD_HELP
@@ -71,6 +72,7 @@ def add_parser(sub) -> None:
     g.add_argument("--learned-lengths", action="store_true", help=BEYOND_THESIS_HELP["learned_lengths"])
     g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
     g.add_argument("--pose-memory", action="store_true", help=POSE_MEMORY_HELP)
+    g.add_argument("--pair-guard", action="store_true", help=PAIR_GUARD_HELP)
     g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
                    help=f"(with --remove pelvis) {WHEN_LOST_HELP}")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
@@ -203,7 +205,7 @@ def run_gaps(args) -> int:
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
                             pose_memory=args.pose_memory, short_gaps=short_gaps, rate_hz=rec.rate_hz,
-                            partial=partial))
+                            partial=partial, pair_guard=args.pair_guard))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -341,7 +343,8 @@ def options_text(args) -> str:
     on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
                                   ("--limb-memory", args.limb_memory), ("--learned-lengths", args.learned_lengths),
                                   ("--body-model", args.body_model), ("--end-model", args.end_model),
-                                  ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory)) if flag]
+                                  ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory),
+                                  ("--pair-guard", args.pair_guard)) if flag]
     if args.reacquire_step:
         on.append(f"--reacquire-step {args.reacquire_step}")
     if args.blend_half_life:

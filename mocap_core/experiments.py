@@ -137,7 +137,8 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             fill_options: dict | None = None, hips_lost: str = "hold", rebuild: bool = False,
             tracking: np.ndarray | None = None, tracking_of: tuple[str, ...] = (),
             pose_memory: bool = False, short_gaps: tuple[int, int] | None = None,
-            rate_hz: float | None = None, partial: tuple[np.ndarray, np.ndarray] | None = None) -> GapRun:
+            rate_hz: float | None = None, partial: tuple[np.ndarray, np.ndarray] | None = None,
+            pair_guard: bool = False) -> GapRun:
     """Hide ``joints`` (and landmarks named in it) in frames [start, stop) and fill them; compare
     with the complete take. ``short_gaps`` (length, every), frames: hide them instead in gaps of
     ``length`` frames, one starting every ``every`` frames from ``start`` on (a studio's occlusions are
@@ -145,7 +146,8 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     paces the fill's blends. ``rebuild``: lost limb landmarks rebuilt from their segment's others and
     from the profile's tracking markers (``tracking``, frames x markers x 3; ``tracking_of``: the
     segment of each, LandmarkMap.tracking_of), which stay seen. ``pose_memory``: lost knee and ankle
-    landmarks from the take's earlier poses (mocap_core.pose_memory), after the rebuild. ``partial``: the
+    landmarks from the take's earlier poses (mocap_core.pose_memory), after the rebuild. ``pair_guard``: a bony
+    pair whose spacing jumped dropped first (mocap_core.pair_guard). ``partial``: the
     take's landmarks kept from some of their markers and their mask (PartialMeans.fill_landmarks of the whole
     take), which fill those still lost after the rebuild and the pose memory, as in the hip node; not the
     hidden ones."""
@@ -170,7 +172,7 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     # the profile's landmarks: those the complete take has somewhere
     present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
     frame_s = 1.0 / rate_hz if rate_hz else float("nan")
-    lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present).fill_landmarks(
+    lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present, pair_guard=pair_guard).fill_landmarks(
         lm, tracking, np.arange(len(lm)) * frame_s)
     if partial is not None:  # (given whole, not LandmarkFills' own: it would keep the hidden landmarks from markers)
         kept = partial[1] & ~hidden_lm & np.isnan(lm).any(axis=2)

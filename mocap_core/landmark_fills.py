@@ -1,5 +1,5 @@
-"""The landmark-level gap fills, in their order: the segment rebuild (with the leg hinge), the pose memory,
-then the partial means (with the rebuild).
+"""The landmark-level gap fills, in their order: the pair guard (which drops a bony pair whose spacing jumped),
+the segment rebuild (with the leg hinge), the pose memory, then the partial means (with the rebuild).
 
 One place for how they go together, used by the hip node, the offline pipeline and `mocap eval gaps`:
 each fills only what the ones before could not, and never learns from what they filled.
@@ -11,6 +11,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from mocap_core.leg_hinge import LegHinge
+from mocap_core.pair_guard import PairGuard
 from mocap_core.partial_means import PartialMeans
 from mocap_core.pose_memory import PoseMemory
 from mocap_core.profiles import LandmarkMap
@@ -21,10 +22,12 @@ class LandmarkFills:
     """``tracking_of``: the segment of each tracking marker (LandmarkMap.tracking_of); ``present``: the
     landmark names the profile has (LandmarkMap.present()); ``means``: the landmark map, whose landmarks that are
     the mean of several markers are then kept, with the rebuild, while some of those are seen (PartialMeans:
-    it needs the frame's markers). Keep one per actor: the fills keep state."""
+    it needs the frame's markers); ``pair_guard``: drop the bony pairs whose spacing jumped (PairGuard). Keep one
+    per actor: the fills keep state."""
 
     def __init__(self, rebuild: bool, pose_memory: bool, tracking_of: Sequence[str] = (),
-                 present: Iterable[str] = (), means: LandmarkMap | None = None):
+                 present: Iterable[str] = (), means: LandmarkMap | None = None, pair_guard: bool = False):
+        self.guard = PairGuard() if pair_guard else None
         self.rebuilder = SegmentRebuilder(tracking_of) if rebuild else None
         hinge = LegHinge(tracking_of) if rebuild else None
         self.leg_hinge = hinge if hinge is not None and hinge.active else None
@@ -37,6 +40,8 @@ class LandmarkFills:
         frame's time (the pose memory finds poses by the toe's velocity too); ``markers``: the frame's markers
         as received (the partial means)."""
         filled = None
+        if self.guard is not None:  # (lost now: what follows fills them like any other)
+            self.guard.fill(landmarks, time_s)
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking)
         if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
@@ -54,6 +59,9 @@ class LandmarkFills:
         """Frames (F, n_landmarks, 3) -> the filled copy and the (F, n_landmarks) mask (None: no fill on);
         ``times_s``: the frames' times; ``markers``: the frames' markers (F, n_labels, 3)."""
         filled = None
+        if self.guard is not None:
+            landmarks = np.array(landmarks, dtype=np.float64, copy=True)
+            self.guard.fill_landmarks(landmarks, times_s)
         if self.rebuilder is not None:
             if tracking is None and self.rebuilder.n_tracking:  # none given: the tracking markers are lost
                 tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)

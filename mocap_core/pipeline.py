@@ -41,7 +41,7 @@ class SkeletonPipeline:
                  fill_options: dict | None = None):
         """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
         to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles
-        from the pose memory, swivel, segment carry, the blends at loss and re-acquisition). ``rate_hz``:
+        from the pose memory, bony pairs whose spacing jumped dropped, swivel, segment carry, the blends at loss and re-acquisition). ``rate_hz``:
         the take's frame rate, which paces the blends (else blend.DEFAULT_FRAME_S a frame).
         ``fill_options``: the gap filler's options instead of ``beyond``'s (gapfill.BEYOND_THESIS)."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
@@ -49,7 +49,7 @@ class SkeletonPipeline:
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         on = beyond and fill_gaps  # the landmark fills are gap fills
         self.fills = LandmarkFills(on, on, self.landmark_map.tracking_of, self.landmark_map.present(),
-                                   self.landmark_map)
+                                   self.landmark_map, pair_guard=on)
         self.localizer = Localizer(profile.body)
         options = fill_options if fill_options is not None else BEYOND_THESIS if beyond else {}
         self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None

@@ -6,7 +6,8 @@ independent of the marker set. Flags: measured, interpolated (the pelvis markers
 predicted, and with ``rebuild`` the forearm, foot, shank and acromion landmarks it rebuilt, with the help of
 the profile's tracking markers, the knees and ankles the leg hinge put, and the landmarks still lost that are the
 mean of several markers of which some are seen (mocap_core.partial_means); with ``pose_memory`` the
-knee and ankle landmarks it recalled from the take's earlier poses) or missing.
+knee and ankle landmarks it recalled from the take's earlier poses) or missing (with ``pair_guard`` also a bony
+pair whose spacing jumped, mocap_core.pair_guard).
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
 from mocap_core.landmark_fills import LandmarkFills
+from mocap_core.pair_guard import PAIR_GUARD_HELP
 from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.profiles import LANDMARKS, load_profile
 from mocap_core.segment_rebuild import REBUILD_HELP
@@ -30,6 +32,7 @@ class Params(BaseModel):
     when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
     rebuild: bool = Field(False, description=REBUILD_HELP)
     pose_memory: bool = Field(False, description=POSE_MEMORY_HELP)
+    pair_guard: bool = Field(False, description=PAIR_GUARD_HELP)
 
 
 class HipInterpolation(Node):
@@ -55,7 +58,7 @@ class HipInterpolation(Node):
             self.labels = msg.labels
             # (new ones: what they learned was of the old marker set's landmarks)
             self.fills = LandmarkFills(self.params.rebuild, self.params.pose_memory, self.map.tracking_of,
-                                       self.map.present(), self.map)
+                                       self.map.present(), self.map, self.params.pair_guard)
             if (self.params.rebuild or self.params.pose_memory) and self.map.absent_tracking:
                 self.log.warning("tracking markers %s of profile %s are not in the stream: gaps filled "
                                  "without them", ", ".join(self.map.absent_tracking), self.profile.name)
@@ -66,6 +69,9 @@ class HipInterpolation(Node):
         fills_on = self.params.rebuild or self.params.pose_memory  # (both read the tracking markers)
         rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if fills_on else None,
                                   msg.header.capture_time_s, msg.positions)
+        if self.fills.guard is not None:
+            for said in self.fills.guard.began:
+                self.log.warning("%s: both dropped until their spacing is back", said)
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

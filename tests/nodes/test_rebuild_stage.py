@@ -140,3 +140,44 @@ def test_recalled_knee_and_ankle_are_flagged_interpolated():
         for loop in loops:
             loop.ctx.close()
         zctx.term()
+
+
+def test_a_jumping_wrist_pair_is_dropped_and_said(caplog):
+    """hip_interpolation with ``pair_guard: true`` on walk2, whose left wrist markers swing through 28-211 mm
+    (74 apart elsewhere) from 4.2 s to 4.85 s: both flagged missing there, a warning says so, the rest is kept."""
+    take = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "walk2")
+    zctx = zmq.Context()
+    specs = [
+        (NodeSpec(id="hips", kind="hip_interpolation", params={"profile": "dance28", "pair_guard": True},
+                  pub_endpoint="inproc://pg-hips"), HipInterpolation),
+        (NodeSpec(id="seen_markers", kind="collect", remaps={"in": "markers/filled"}, pub_endpoint="inproc://pg-c",
+                  local_topics=["markers/filled"]), _Collect),
+    ]
+    loops = [NodeLoop(spec, cls, zctx) for spec, cls in specs]
+    wire_hand_over(loops)
+    for loop in loops:
+        loop.node.setup()
+    hips, markers = (loop.node for loop in loops)
+    frames = range(int(3.5 * take.rate_hz), int(5.5 * take.rate_hz))
+    try:
+        with caplog.at_level("WARNING", logger="mocap.hips"):
+            for f in frames:
+                hips.on_message("markers/raw", MarkerFrame(header=MarkerFrame.make_header(f, f / take.rate_hz, 1),
+                                                           labels=take.labels,
+                                                           positions=take.positions[f].astype(np.float32),
+                                                           flags=np.zeros(len(take.labels), np.uint8)))
+                for loop in loops:
+                    loop.step({})
+        assert len(markers.got) == len(frames)
+        times = np.array(frames) / take.rate_hz
+        for name in ("L_RSP", "L_USP"):
+            missing = np.array([m.flags[LANDMARK_INDEX[name]] == FLAG_MISSING for m in markers.got])
+            assert missing[(times > 4.45) & (times < 4.8)].all()
+            assert not missing[(times < 4.15) | (times > 4.95)].any()
+        right = np.array([m.flags[LANDMARK_INDEX["R_RSP"]] == FLAG_MISSING for m in markers.got])
+        assert not right[(times < 3.8) | (times > 3.9)].any()  # (its own one-frame jump at 3.83 s: 81 -> 126 mm)
+        assert any("L_RSP and L_USP" in r.getMessage() for r in caplog.records), caplog.text
+    finally:
+        for loop in loops:
+            loop.ctx.close()
+        zctx.term()

@@ -1,0 +1,80 @@
+"""Beyond the thesis: a bony pair whose spacing jumps is dropped until it is back (the hip stage, first of the
+landmark fills).
+
+The styloids sit on the ends of the radius and the ulna, which the distal radio-ulnar joint holds together, and
+the malleoli on the tibia and the fibula (segment_rebuild.BONY_PAIRS): their spacing hardly changes. When it jumps,
+the cameras have put a marker wrong (a ghost, a swap, a reflection), and which one cannot be told from the two. So
+both are marked lost from where the spacing is off the one learned by more than PAIR_OFF of it, until it is back
+within PAIR_BACK_M and held there (not swung through), and the gap fills take over. A marker that slid slowly is followed (SPACING_RATE a frame); one
+stuck back elsewhere is taken at its new spacing once the pair holds it for PAIR_STEADY_S. A glitch does not: walk2's
+swings through 28-211 mm.
+
+walk2 of the Qualisys dance set: its left wrist markers are 74 mm apart, and 28-211 mm from 4.2 s to 4.85 s. With
+the elbow hidden from 1 s (studio options) the swivel put the elbow from that wrist, 105 mm off at 4.7 s: 18.4 /
+105.5 -> 14.6 / 36.1 mm (mean / max) with the pair dropped there.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mocap_core.blend import DEFAULT_FRAME_S
+from mocap_core.profiles import LANDMARK_INDEX
+from mocap_core.segment_rebuild import BONY_PAIRS
+
+PAIR_OFF = 0.25        # dropped when the spacing is off the learned one by this part of it
+PAIR_BACK_M = 0.005    # taken back within this of the learned spacing,
+PAIR_STEADY_S = 0.2    # or at a new one held within PAIR_BACK_M for this long (a marker stuck back elsewhere)
+SPACING_RATE = 1 / 100  # how fast the learned spacing follows the frames kept (as segment_rebuild.DISTANCE_RATE)
+PAIRS = tuple((f"{side}_{a}", f"{side}_{b}") for side in "LR" for a, b in BONY_PAIRS.values())
+PAIR_GUARD_HELP = ("beyond the thesis: a bony pair (styloids, malleoli) whose spacing jumps more than "
+                   f"{PAIR_OFF:.0%} off the one learned has a marker put wrong by the cameras; both are "
+                   "dropped (marked lost, for the gap fills) until it is back")
+
+
+class PairGuard:
+    """Drops the bony pairs whose spacing is off, frame by frame. Keep one per actor: it learns the spacings."""
+
+    def __init__(self):
+        self.first = np.array([LANDMARK_INDEX[a] for a, _ in PAIRS])
+        self.second = np.array([LANDMARK_INDEX[b] for _, b in PAIRS])
+        self.spacing = np.full(len(PAIRS), np.nan)  # learned (NaN: not yet seen together)
+        self.dropped = np.zeros(len(PAIRS), bool)
+        self.held = np.full(len(PAIRS), np.nan)     # while dropped: the spacing the pair holds to, since
+        self.held_s = np.zeros(len(PAIRS))          # this long
+        self.last_time = np.nan
+        self.began: list[str] = []                  # what the last frame began to drop, said for a log
+
+    def fill(self, landmarks: np.ndarray, time_s: float = np.nan) -> np.ndarray:
+        """One frame of landmarks (n_landmarks, 3), in place: the dropped pairs set to NaN; returns their mask.
+        A dropped pair not both seen is taken back: the one seen cannot be told wrong."""
+        dt = time_s - self.last_time if np.isfinite(time_s - self.last_time) else DEFAULT_FRAME_S
+        self.last_time = time_s
+        spacing = np.linalg.norm(landmarks[self.first] - landmarks[self.second], axis=1)  # NaN: one lost
+        seen = np.isfinite(spacing)
+        new = seen & np.isnan(self.spacing)
+        self.spacing[new] = spacing[new]
+        off = np.abs(spacing - self.spacing)
+        moved = np.abs(spacing - self.held) > PAIR_BACK_M
+        self.held[moved], self.held_s[moved] = spacing[moved], 0.0
+        self.held_s[~moved] += dt
+        steady = self.dropped & seen & (self.held_s >= PAIR_STEADY_S)
+        self.spacing[steady] = spacing[steady]
+        self.dropped &= seen & ((off > PAIR_BACK_M) | moved) & ~steady  # (a swing through it is not back)
+        began = ~self.dropped & seen & ~steady & (off > PAIR_OFF * self.spacing)
+        self.dropped |= began
+        self.held[began], self.held_s[began] = spacing[began], 0.0
+        keep = seen & ~self.dropped
+        self.spacing[keep] += SPACING_RATE * (spacing[keep] - self.spacing[keep])
+        self.began = [f"{PAIRS[p][0]} and {PAIRS[p][1]} {spacing[p] * 1000:.0f} mm apart where they were "
+                      f"{self.spacing[p] * 1000:.0f}" for p in np.flatnonzero(began)]
+        mask = np.zeros(len(landmarks), bool)
+        mask[self.first[self.dropped]] = mask[self.second[self.dropped]] = True
+        landmarks[mask] = np.nan
+        return mask
+
+    def fill_landmarks(self, landmarks: np.ndarray, times_s: np.ndarray | None = None) -> np.ndarray:
+        """Frames (F, n_landmarks, 3), in place; returns the (F, n_landmarks) mask of the landmarks dropped."""
+        mask = np.zeros(landmarks.shape[:2], bool)
+        for f in range(len(landmarks)):
+            mask[f] = self.fill(landmarks[f], np.nan if times_s is None else times_s[f])
+        return mask
