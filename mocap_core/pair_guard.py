@@ -33,9 +33,9 @@ PAIR_BACK_M = 0.005    # taken back within this of the learned spacing,
 PAIR_STEADY_S = 0.2    # or at a new one held within PAIR_BACK_M for this long (a marker stuck back elsewhere)
 SPACING_RATE = 1 / 100  # how fast the learned spacing follows the frames kept (as segment_rebuild.DISTANCE_RATE)
 PAIRS = tuple((f"{side}_{a}", f"{side}_{b}") for side in "LR" for a, b in BONY_PAIRS.values())
-PAIR_GUARD_HELP = ("beyond the thesis: a bony pair (styloids, malleoli) whose spacing jumps more than "
-                   f"{PAIR_OFF:.0%} off the one learned has a marker put wrong by the cameras; both are "
-                   "dropped (marked lost, for the gap fills) until it is back")
+PAIR_GUARD_HELP = ("beyond the thesis: a bony pair (styloids, malleoli) whose spacing is off the one learned by "
+                   f"more than {PAIR_OFF * 100:.0f} percent has a marker put wrong by the cameras; both are dropped "
+                   "(marked lost, for the gap fills) until it is back")
 
 
 class PairGuard:
