@@ -15,6 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mocap_core.hip_interpolation import HIP_INDEX, HipInterpolator  # noqa: E402
 from mocap_core.leg_hinge import LegHinge  # noqa: E402
 from mocap_core.localization import Localizer  # noqa: E402
+from mocap_core.pair_guard import PairGuard  # noqa: E402
 from mocap_core.pose_memory import CAPACITY, PoseMemory  # noqa: E402
 from mocap_core.profiles import LANDMARK_INDEX  # noqa: E402
 from mocap_core.profiles import load_profile  # noqa: E402
@@ -50,6 +51,8 @@ def main():
         print(f"{file} ({len(rec.labels)} markers), best of 5 passes over {n} frames, us per frame:")
         print(f"  profile -> landmarks       {per_call_us(lambda i: lmap.apply(rec.positions[i]), n):7.1f}")
         print(f"  hip interpolation          {per_call_us(lambda i: hips.fill(lm[i][HIP_INDEX]), n):7.1f}")
+        guard, copy = PairGuard(), lm.copy()
+        print(f"  pair guard                 {per_call_us(lambda i: guard.fill(copy[i], i / rec.rate_hz), n):7.1f}")
         print(f"  localization, one frame    {per_call_us(lambda i: loc.localize(lm[i]), n):7.1f}  (target <= 50)")
         batch = per_call_us(lambda i: loc.localize(lm), 1) / n
         print(f"  localization, batch of {n}  {batch:7.1f}")

@@ -23,8 +23,10 @@ wrists (2-31 frames, to 126-211 mm) and karate's right at 32.3 s (to 408 mm); no
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from mocap_core.blend import DEFAULT_FRAME_S
+from mocap_core.ik.kernels import vnorm
 from mocap_core.profiles import LANDMARK_INDEX
 from mocap_core.segment_rebuild import BONY_PAIRS
 
@@ -42,42 +44,27 @@ class PairGuard:
     """Drops the bony pairs whose spacing is off, frame by frame. Keep one per actor: it learns the spacings."""
 
     def __init__(self):
-        self.first = np.array([LANDMARK_INDEX[a] for a, _ in PAIRS])
-        self.second = np.array([LANDMARK_INDEX[b] for _, b in PAIRS])
+        self.pairs = np.array([[LANDMARK_INDEX[a], LANDMARK_INDEX[b]] for a, b in PAIRS])
         self.spacing = np.full(len(PAIRS), np.nan)  # learned (NaN: not yet seen together)
-        self.dropped = np.zeros(len(PAIRS), bool)
+        self.dropped = np.zeros(len(PAIRS), np.bool_)
         self.held = np.full(len(PAIRS), np.nan)     # while dropped: the spacing the pair holds to, since
         self.held_s = np.zeros(len(PAIRS))          # this long
+        self.began = np.zeros(len(PAIRS), np.bool_)  # which the last frame began to drop
         self.last_time = np.nan
-        self.began: list[str] = []                  # what the last frame began to drop, said for a log
 
     def fill(self, landmarks: np.ndarray, time_s: float = np.nan) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3), in place: the dropped pairs set to NaN; returns their mask.
         A dropped pair not both seen is taken back: the one seen cannot be told wrong."""
         dt = time_s - self.last_time if np.isfinite(time_s - self.last_time) else DEFAULT_FRAME_S
         self.last_time = time_s
-        spacing = np.linalg.norm(landmarks[self.first] - landmarks[self.second], axis=1)  # NaN: one lost
-        seen = np.isfinite(spacing)
-        new = seen & np.isnan(self.spacing)
-        self.spacing[new] = spacing[new]
-        off = np.abs(spacing - self.spacing)
-        moved = np.abs(spacing - self.held) > PAIR_BACK_M
-        self.held[moved], self.held_s[moved] = spacing[moved], 0.0
-        self.held_s[~moved] += dt
-        steady = self.dropped & seen & (self.held_s >= PAIR_STEADY_S)
-        self.spacing[steady] = spacing[steady]
-        self.dropped &= seen & ((off > PAIR_BACK_M) | moved) & ~steady  # (a swing through it is not back)
-        began = ~self.dropped & seen & ~steady & (off > PAIR_OFF * self.spacing)
-        self.dropped |= began
-        self.held[began], self.held_s[began] = spacing[began], 0.0
-        keep = seen & ~self.dropped
-        self.spacing[keep] += SPACING_RATE * (spacing[keep] - self.spacing[keep])
-        self.began = [f"{PAIRS[p][0]} and {PAIRS[p][1]} {spacing[p] * 1000:.0f} mm apart where they were "
-                      f"{self.spacing[p] * 1000:.0f}" for p in np.flatnonzero(began)]
-        mask = np.zeros(len(landmarks), bool)
-        mask[self.first[self.dropped]] = mask[self.second[self.dropped]] = True
-        landmarks[mask] = np.nan
+        mask = np.zeros(len(landmarks), np.bool_)
+        guard_frame(landmarks, self.pairs, self.spacing, self.dropped, self.held, self.held_s, self.began, dt, mask)
         return mask
+
+    def said(self) -> list[str]:
+        """What the last frame began to drop, for a log."""
+        return [f"{PAIRS[p][0]} and {PAIRS[p][1]} {self.held[p] * 1000:.0f} mm apart where they were "
+                f"{self.spacing[p] * 1000:.0f}" for p in np.flatnonzero(self.began)]
 
     def fill_landmarks(self, landmarks: np.ndarray, times_s: np.ndarray | None = None) -> np.ndarray:
         """Frames (F, n_landmarks, 3), in place; returns the (F, n_landmarks) mask of the landmarks dropped."""
@@ -85,3 +72,33 @@ class PairGuard:
         for f in range(len(landmarks)):
             mask[f] = self.fill(landmarks[f], np.nan if times_s is None else times_s[f])
         return mask
+
+
+@njit(cache=True)
+def guard_frame(lm, pairs, spacing, dropped, held, held_s, began, dt, mask):
+    for p in range(len(pairs)):
+        a, b = pairs[p, 0], pairs[p, 1]
+        now = vnorm(lm[a] - lm[b])  # NaN: one lost
+        seen = not np.isnan(now)
+        if seen and np.isnan(spacing[p]):
+            spacing[p] = now
+        off = abs(now - spacing[p])
+        if abs(now - held[p]) > PAIR_BACK_M:
+            held[p], held_s[p] = now, 0.0
+        else:  # (held within PAIR_BACK_M since held_s)
+            held_s[p] += dt
+        moved = held_s[p] == 0.0
+        began[p] = False
+        if dropped[p]:
+            if seen and held_s[p] >= PAIR_STEADY_S:  # stuck back elsewhere: learned anew
+                spacing[p], dropped[p] = now, False
+            elif not seen or (off <= PAIR_BACK_M and not moved):  # (a swing through it is not back)
+                dropped[p] = False
+        elif seen and off > PAIR_OFF * spacing[p]:
+            dropped[p] = began[p] = True
+            held[p], held_s[p] = now, 0.0
+        if dropped[p]:
+            mask[a] = mask[b] = True
+            lm[a] = lm[b] = np.nan
+        elif seen:
+            spacing[p] += SPACING_RATE * (now - spacing[p])

@@ -24,7 +24,7 @@ PACKAGE = Path(__file__).resolve().parent
 # Where "this checkout's kernels are compiled" is remembered (next to numba's own cache files).
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
 # every solver among them (a test checks)
-PARTS = ("localization", "rebuild", "pose_memory", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")
+PARTS = ("localization", "rebuild", "pose_memory", "pair_guard", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")
 
 
 def warm_up(parts: tuple[str, ...] = PARTS) -> None:
@@ -35,8 +35,8 @@ def warm_up(parts: tuple[str, ...] = PARTS) -> None:
 
 
 def _warm(part: str) -> None:
-    """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory,
-    or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic
+    """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
+    pair guard, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic
     fills of BEYOND_THESIS)."""
     from mocap_core.body_model import MIN_SAMPLES
     from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
@@ -69,6 +69,11 @@ def _warm(part: str) -> None:
 
         lm = np.random.default_rng(0).normal(size=(len(LANDMARKS), 3))
         PoseMemory(["SACR", "L_IAS", "R_IAS", "L_FM2", "L_FLE"]).fill(lm)
+        return
+    if part == "pair_guard":
+        from mocap_core.pair_guard import PairGuard
+
+        PairGuard().fill(np.random.default_rng(0).normal(size=(len(LANDMARKS), 3)))
         return
     if part == "localization":
         Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))

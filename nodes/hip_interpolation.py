@@ -49,6 +49,8 @@ class HipInterpolation(Node):
             warm_up(("rebuild",))  # its kernel loaded before ready, not on the first frame (0.65 s)
         if self.params.pose_memory:
             warm_up(("pose_memory",))
+        if self.params.pair_guard:
+            warm_up(("pair_guard",))
         self.labels: list[str] | None = None
         self.map = None
 
@@ -70,7 +72,7 @@ class HipInterpolation(Node):
         rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if fills_on else None,
                                   msg.header.capture_time_s, msg.positions)
         if self.fills.guard is not None:
-            for said in self.fills.guard.began:
+            for said in self.fills.guard.said():
                 self.log.warning("%s: both dropped until their spacing is back", said)
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
