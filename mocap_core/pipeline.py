@@ -41,7 +41,8 @@ class SkeletonPipeline:
                  fill_options: dict | None = None):
         """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
         to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles
-        from the pose memory, bony pairs whose spacing jumped dropped, swivel, segment carry, the blends at loss and re-acquisition). ``rate_hz``:
+        from the pose memory, bony pairs whose spacing jumped dropped, swivel, segment carry, the blends
+        at loss and re-acquisition). ``rate_hz``:
         the take's frame rate, which paces the blends (else blend.DEFAULT_FRAME_S a frame).
         ``fill_options``: the gap filler's options instead of ``beyond``'s (gapfill.BEYOND_THESIS)."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S

@@ -73,7 +73,7 @@ class HipInterpolation(Node):
                                   msg.header.capture_time_s, msg.positions)
         if self.fills.guard is not None:
             for said in self.fills.guard.said():
-                self.log.warning("%s: both dropped until their spacing is back", said)
+                self.ctx.bad_input("pair_dropped", f"{said}: both dropped until their spacing is back")
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

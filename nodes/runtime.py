@@ -374,6 +374,11 @@ class NodeContext:
         if n <= 5 or n % 1000 == 0:
             self.log.warning("%s (%s #%d)", text, reason, n)
 
+    def bad_input(self, reason: str, text: str) -> None:
+        """Bad input a node met and handled itself (a marker put wrong, say): counted per reason in the
+        heartbeat's errors and logged like the runtime's own."""
+        self._error(reason, text)
+
     def handler_error(self, topic: str, exc: BaseException) -> None:
         self._error(f"handler_{type(exc).__name__}", f"handler for {topic!r} failed: {exc!r}")
 

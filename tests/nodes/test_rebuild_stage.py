@@ -177,6 +177,7 @@ def test_a_jumping_wrist_pair_is_dropped_and_said(caplog):
         right = np.array([m.flags[LANDMARK_INDEX["R_RSP"]] == FLAG_MISSING for m in markers.got])
         assert not right[(times < 3.8) | (times > 3.9)].any()  # (its own one-frame jump at 3.83 s: 81 -> 126 mm)
         assert any("L_RSP and L_USP" in r.getMessage() for r in caplog.records), caplog.text
+        assert hips.ctx.heartbeat("running", 0.0).errors == {"pair_dropped": 2}  # the right wrist's jump too
     finally:
         for loop in loops:
             loop.ctx.close()
