@@ -88,34 +88,45 @@ def test_rebuilt_landmarks_are_flagged_and_their_joint_is_estimated(lost, joint)
         zctx.term()
 
 
-def test_recalled_knee_and_ankle_are_flagged_interpolated():
-    """hip_interpolation with ``pose_memory: true`` on the 28-marker dance set (nothing on shank or foot
-    to rebuild from): the knee and ankle markers come back from the poses seen before they were lost."""
-    take = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance1")
-    hidden = [take.labels.index(name) for name in ("Knee_L", "Ankle_L")]
+def _hip_stage(params, name):
+    """A hip_interpolation node and a collector of its ``markers/filled``, in one process, set up."""
     zctx = zmq.Context()
     specs = [
-        (NodeSpec(id="hips", kind="hip_interpolation", params={"profile": "dance28", "pose_memory": True},
-                  pub_endpoint="inproc://pm-hips"), HipInterpolation),
-        (NodeSpec(id="seen_markers", kind="collect", remaps={"in": "markers/filled"}, pub_endpoint="inproc://pm-c",
+        (NodeSpec(id="hips", kind="hip_interpolation", params=params, pub_endpoint=f"inproc://{name}-hips"),
+         HipInterpolation),
+        (NodeSpec(id="seen_markers", kind="collect", remaps={"in": "markers/filled"}, pub_endpoint=f"inproc://{name}-c",
                   local_topics=["markers/filled"]), _Collect),
     ]
     loops = [NodeLoop(spec, cls, zctx) for spec, cls in specs]
     wire_hand_over(loops)
     for loop in loops:
         loop.node.setup()
-    hips, markers = (loop.node for loop in loops)
+    return zctx, loops
+
+
+def _feed(loops, take, f, positions):
+    """Frame f of the take, with these positions, into the hip node; every loop stepped once."""
+    loops[0].node.on_message("markers/raw", MarkerFrame(header=MarkerFrame.make_header(f, f / take.rate_hz, 1),
+                                                        labels=take.labels, positions=positions.astype(np.float32),
+                                                        flags=np.zeros(len(take.labels), np.uint8)))
+    for loop in loops:
+        loop.step({})
+
+
+def test_recalled_knee_and_ankle_are_flagged_interpolated():
+    """hip_interpolation with ``pose_memory: true`` on the 28-marker dance set (nothing on shank or foot
+    to rebuild from): the knee and ankle markers come back from the poses seen before they were lost."""
+    take = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance1")
+    hidden = [take.labels.index(name) for name in ("Knee_L", "Ankle_L")]
+    zctx, loops = _hip_stage({"profile": "dance28", "pose_memory": True}, "pm")
+    markers = loops[1].node
     lost_from, frames = 300, 360
     try:
         for f in range(frames):
-            pos = take.positions[f].astype(np.float32)
+            pos = take.positions[f].copy()
             if f >= lost_from:
                 pos[hidden] = np.nan
-            hips.on_message("markers/raw", MarkerFrame(header=MarkerFrame.make_header(f, f / take.rate_hz, 1),
-                                                       labels=take.labels, positions=pos,
-                                                       flags=np.zeros(len(take.labels), np.uint8)))
-            for loop in loops:
-                loop.step({})
+            _feed(loops, take, f, pos)
         assert len(markers.got) == frames
         for name, label in (("L_FLE", "Knee_L"), ("L_FAL", "Ankle_L")):
             k = LANDMARK_INDEX[name]
@@ -146,28 +157,13 @@ def test_a_jumping_wrist_pair_is_dropped_and_said(caplog):
     """hip_interpolation with ``pair_guard: true`` on walk2, whose left wrist markers swing through 28-211 mm
     (74 apart elsewhere) from 4.2 s to 4.85 s: both flagged missing there, a warning says so, the rest is kept."""
     take = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "walk2")
-    zctx = zmq.Context()
-    specs = [
-        (NodeSpec(id="hips", kind="hip_interpolation", params={"profile": "dance28", "pair_guard": True},
-                  pub_endpoint="inproc://pg-hips"), HipInterpolation),
-        (NodeSpec(id="seen_markers", kind="collect", remaps={"in": "markers/filled"}, pub_endpoint="inproc://pg-c",
-                  local_topics=["markers/filled"]), _Collect),
-    ]
-    loops = [NodeLoop(spec, cls, zctx) for spec, cls in specs]
-    wire_hand_over(loops)
-    for loop in loops:
-        loop.node.setup()
+    zctx, loops = _hip_stage({"profile": "dance28", "pair_guard": True}, "pg")
     hips, markers = (loop.node for loop in loops)
     frames = range(int(3.5 * take.rate_hz), int(5.5 * take.rate_hz))
     try:
         with caplog.at_level("WARNING", logger="mocap.hips"):
             for f in frames:
-                hips.on_message("markers/raw", MarkerFrame(header=MarkerFrame.make_header(f, f / take.rate_hz, 1),
-                                                           labels=take.labels,
-                                                           positions=take.positions[f].astype(np.float32),
-                                                           flags=np.zeros(len(take.labels), np.uint8)))
-                for loop in loops:
-                    loop.step({})
+                _feed(loops, take, f, take.positions[f])
         assert len(markers.got) == len(frames)
         times = np.array(frames) / take.rate_hz
         for name in ("L_RSP", "L_USP"):
