@@ -60,7 +60,7 @@ class HipInterpolation(Node):
             self.labels = msg.labels
             # (new ones: what they learned was of the old marker set's landmarks)
             self.fills = LandmarkFills(self.params.rebuild, self.params.pose_memory, self.map.tracking_of,
-                                       self.map.present(), self.map, self.params.pair_guard)
+                                       self.map.present(), self.map, pair_guard=self.params.pair_guard)
             if (self.params.rebuild or self.params.pose_memory) and self.map.absent_tracking:
                 self.log.warning("tracking markers %s of profile %s are not in the stream: gaps filled "
                                  "without them", ", ".join(self.map.absent_tracking), self.profile.name)
