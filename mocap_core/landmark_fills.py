@@ -43,7 +43,7 @@ class LandmarkFills:
         if self.guard is not None:  # (lost now: what follows fills them like any other)
             self.guard.fill(landmarks, time_s)
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
-            filled = self.rebuilder.fill(landmarks, tracking)
+            filled = self.rebuilder.fill(landmarks, tracking, time_s)
         if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
             filled |= self.leg_hinge.fill(landmarks, tracking, filled)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
@@ -65,7 +65,7 @@ class LandmarkFills:
         if self.rebuilder is not None:
             if tracking is None and self.rebuilder.n_tracking:  # none given: the tracking markers are lost
                 tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
-            landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking)
+            landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking, times_s)
         if self.leg_hinge is not None:
             for f in range(len(landmarks)):
                 filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f], filled[f])

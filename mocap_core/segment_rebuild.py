@@ -164,6 +164,18 @@ ROLL_FIRM_FULL = 0.08
 # average, 30 / 28 with it left out.
 BONY_PAIRS = {"forearm": ("RSP", "USP"), "shank": ("FAL", "TAM")}
 SLID_M = 0.005
+# A marker can also slide with the pair's spacing kept: the Vicon take's inner wrist marker is 30 mm nearer the
+# forearm's marker at 8.7 s than at 1 s, its spacing to the outer one, 4-5 mm short from 1.5 s on, back within 4 mm
+# there. So while one of the pair has its distances to the segment's other seen partners changed by over
+# SLID_ALONG_M, and by over SLID_ALONG_RATIO times the other's, it is found slid once that has held for
+# SLID_ALONG_S, spacing or not. A strike swings a forearm's skin against its wrist bar for less than that: karate's
+# outer wrist marker runs 24-36 mm off its reference distance to the forearm's marker for 0.2 s at 8.3 s, the inner
+# one by 4-23, with the bar's spacing kept. Left elbow hidden from 1 s (studio options), the Vicon take 27.3 / 135.7
+# -> 24.0 / 103.2 mm, karate's, the Vicon's right, the sprint's and the walk's unchanged; found slid at once (no
+# hold) karate's left elbow went 18.0 / 59.0 -> 17.9 / 77.9; at 30 mm the Vicon's gain was lost (26.9 / 130.7).
+SLID_ALONG_M = 0.02
+SLID_ALONG_RATIO = 3.0
+SLID_ALONG_S = 0.25
 N_LANDMARKS = len(LANDMARKS)
 
 
@@ -222,10 +234,17 @@ class SegmentRebuilder:
         self.last = np.full((len(self.segments), width, 3), np.nan)
         # per segment and member: which of the bony pair was last found slid against its reference (-1: neither)
         self.slid = np.full((len(self.segments), width), -1, np.int64)
+        # per segment and member: which of the pair has slid along with the spacing kept (SLID_ALONG_M; -1:
+        # neither), and since when (seconds)
+        self.along = np.full((len(self.segments), width), -1, np.int64)
+        self.along_since = np.full((len(self.segments), width), np.nan)
 
-    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None) -> np.ndarray:
+    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None, time_s: float = np.nan
+             ) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3) float64, NaN = lost, and of the tracking markers
-        (n_tracking, 3): fill what can be rebuilt, in place; returns the mask of rebuilt landmarks."""
+        (n_tracking, 3): fill what can be rebuilt, in place; returns the mask of rebuilt landmarks. ``time_s``:
+        the frame's time (NaN: unknown, and a marker slid with its pair's spacing kept is not found,
+        SLID_ALONG_S)."""
         points = landmarks
         if self.n_tracking:
             if tracking is None or len(tracking) != self.n_tracking:
@@ -234,25 +253,27 @@ class SegmentRebuilder:
             points = np.concatenate([landmarks, tracking])
         rebuilt = np.zeros(len(points), np.bool_)
         rebuild_frame(points, self.segments, self.rebuilt_count, self.rigid_count, self.refined_count, self.held_from,
-                      self.shaft_rolls, self.pairs, self.reference, self.distance, self.last, self.slid, rebuilt)
+                      self.shaft_rolls, self.pairs, self.reference, self.distance, self.last, self.slid, self.along,
+                      self.along_since, float(time_s), rebuilt)
         if points is not landmarks:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
 
-    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
+    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None,
+                       times_s: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Landmark frames (F, n_landmarks, 3) and tracking frames (F, n_tracking, 3) -> filled copy of
-        the landmarks and the (F, n_landmarks) rebuilt mask."""
+        the landmarks and the (F, n_landmarks) rebuilt mask; ``times_s``: the frames' times (None: unknown)."""
         out = np.array(landmarks, dtype=np.float64, copy=True)
         mask = np.zeros(out.shape[:2], bool)
         for f in range(out.shape[0]):
-            mask[f] = self.fill(out[f], None if tracking is None else tracking[f])
+            mask[f] = self.fill(out[f], None if tracking is None else tracking[f],
+                                np.nan if times_s is None else times_s[f])
         return out, mask
 
 
 @njit(cache=True)
 def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, reference,
-                  distance, last, slid, rebuilt):
+                  distance, last, slid, along, along_since, time_s, rebuilt):
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
     weights = np.empty(segments.shape[1])
@@ -280,7 +301,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
         if count > MIN_SHAFT_PARTNERS:
             for k in range(rigid):
                 if seen[k] and count - 1 >= _partners(reference[s, k], k, rigid):
-                    slid[s, k] = -1
+                    slid[s, k], along[s, k] = -1, -1
                     for m in range(rigid):
                         if seen[m]:
                             reference[s, k, m] = lm[seg[m]]
@@ -291,7 +312,8 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
         for k in range(rebuilt_count[s]):
             if seen[k] or rebuilt[seg[k]] or not vfinite(reference[s, k, k]):
                 continue
-            slid[s, k] = _slid(lm, seg, rigid, seen, reference[s, k], pairs[s, 0], pairs[s, 1], slid[s, k])
+            slid[s, k] = _slid(lm, seg, rigid, seen, reference[s, k], pairs[s, 0], pairs[s, 1], slid[s, k], along[s],
+                               along_since[s], k, time_s)
             n, shaft = 0, 0
             for m in range(rigid):
                 if m != slid[s, k] and seen[m] and vfinite(reference[s, k, m]):
@@ -344,21 +366,28 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
 
 
 @njit(cache=True)
-def _slid(lm, seg, rigid, seen, reference, i, j, before):
+def _slid(lm, seg, rigid, seen, reference, i, j, before, along, along_since, k, time_s):
     """Which of the bony pair at positions i, j (-1: none) has slid since ``reference``, the member's (BONY_PAIRS):
-    -1 while their spacing holds, ``before`` (the last verdict) where it cannot be told."""
+    -1 while their spacing holds, unless one has slid along with it kept for SLID_ALONG_S (``along``,
+    ``along_since``: the segment's, kept here; ``k``: the member); ``before`` (the last verdict) where it cannot
+    be told."""
     if i < 0 or not (vfinite(reference[i]) and vfinite(reference[j])):
         return -1
     if not (seen[i] and seen[j]):
         return before
-    if _stretch(lm, seg, reference, i, j) <= SLID_M:
-        return -1
     moved_i, moved_j, others = 0.0, 0.0, 0
     for m in range(rigid):
         if m != i and m != j and seen[m] and vfinite(reference[m]):
             moved_i = max(moved_i, _stretch(lm, seg, reference, i, m))
             moved_j = max(moved_j, _stretch(lm, seg, reference, j, m))
             others += 1
+    sliding = -1
+    if others and max(moved_i, moved_j) > max(SLID_ALONG_M, SLID_ALONG_RATIO * min(moved_i, moved_j)):
+        sliding = i if moved_i > moved_j else j
+    if sliding != along[k]:
+        along[k], along_since[k] = sliding, time_s
+    if _stretch(lm, seg, reference, i, j) <= SLID_M:
+        return sliding if sliding >= 0 and time_s - along_since[k] >= SLID_ALONG_S else -1
     if others == 0:
         return before
     return i if moved_i > moved_j else j
