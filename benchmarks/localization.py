@@ -77,11 +77,12 @@ def _rebuild_cost(file, profile, name):
     lm, tracking = lmap.apply(rec.positions[:600]).astype(np.float64), lmap.tracking(rec.positions[:600])
     rebuilder = SegmentRebuilder(lmap.tracking_of)
     for f in range(300):  # learn the references and distances
-        rebuilder.fill(lm[f].copy(), tracking[f])
+        rebuilder.fill(lm[f].copy(), tracking[f], f / rec.rate_hz)
     lost = lm.copy()
     lost[:, [LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]]] = np.nan
-    seen = per_call_us(lambda i: rebuilder.fill(lm[300 + i].copy(), tracking[300 + i]), 300)
-    elbow = per_call_us(lambda i: rebuilder.fill(lost[300 + i].copy(), tracking[300 + i]), 300)
+    seen = per_call_us(lambda i: rebuilder.fill(lm[300 + i].copy(), tracking[300 + i], (300 + i) / rec.rate_hz), 300)
+    elbow = per_call_us(lambda i: rebuilder.fill(lost[300 + i].copy(), tracking[300 + i], (300 + i) / rec.rate_hz),
+                        300)
     print(f"segment rebuild ({name}), us per frame: nothing lost {seen:.1f}, one elbow rebuilt {elbow:.1f}")
 
 
