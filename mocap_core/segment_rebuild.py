@@ -165,7 +165,7 @@ ROLL_FIRM_FULL = 0.08
 BONY_PAIRS = {"forearm": ("RSP", "USP"), "shank": ("FAL", "TAM")}
 SLID_M = 0.005
 # A marker can also slide with the pair's spacing kept: the Vicon take's inner wrist marker is 30 mm nearer the
-# forearm's marker at 8.7 s than at 1 s, its spacing to the outer one, 4-5 mm short from 1.5 s on, back within 4 mm
+# forearm's marker at 8.7 s than at 1 s, its spacing to the outer one, 7-9 mm short from 1.5 s on, back within 4 mm
 # there. So while one of the pair has its distances to the segment's other seen partners changed by over
 # SLID_ALONG_M, and by over SLID_ALONG_RATIO times the other's, it is found slid once that has held for
 # SLID_ALONG_S, spacing or not. A strike swings a forearm's skin against its wrist bar for less than that: karate's
