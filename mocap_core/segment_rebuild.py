@@ -13,7 +13,8 @@ segment's seen markers, from the last frame they were seen with it, carries it:
   (and the tibial tuberosity) keep their place among the malleoli (partners only) and the shank's
   tracking markers;
 - thorax: the acromion keeps its place among the trunk's markers (the other acromion, the spine's, the
-  sternum's), as near as the shoulder blade lets it.
+  sternum's), as near as the shoulder blade lets it;
+- styloids: one lost while the other is seen keeps its place among the other and the forearm's markers.
 
 A profile's ``tracking`` markers (wands and clusters that no landmark names, e.g. the Qualisys set's
 forearm and shank wands) join their bone as partners: the sets without an olecranon marker can then
@@ -67,14 +68,15 @@ REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel o
                 " tracking marker and a landmark; a forearm's rolled by the upper arm's), or of markers on one line "
                 "rolled by the bone above's; elbow, knee and ankle held to the upper arm's, thigh's and shank's "
                 "markers; then a lost knee and ankle from the hip and one shank marker, or the ankle (the leg hinge),"
-                " which also turns a knee rebuilt from 2 to keep its distances from the hip; a lost acromion carried "
+                " which also turns a knee rebuilt from 2 to keep its distances from the hip; a lost styloid, while the "
+                "other is seen, from it and at least 3 more of the forearm's markers; a lost acromion carried "
                 "with the trunk's markers; and a landmark that is the mean of several markers, still lost, kept while"
                 " some are seen (a lost one keeps its offset, turned as the markers nearest it turn)")
 # Rigid bodies of landmarks: (bone, rebuilt when lost, partners only), in the order they are rebuilt:
 # the shank's partners include the malleoli the foot may have rebuilt just before. The profile's
-# tracking markers of a bone (wands, clusters) join it as partners. The styloids only help: rebuilt
-# from the elbow's markers, a lost wrist came out 27 mm off on the sprint where the IK stage's swivel
-# gives 13 mm (the radius turns about the ulna). The malleoli are never rebuilt from the shank: a
+# tracking markers of a bone (wands, clusters) join it as partners. The styloids help the forearm: both
+# rebuilt from the elbow's markers, a lost wrist came out 27 mm off on the sprint where the IK stage's swivel
+# gives 13 mm (the radius turns about the ulna); one is rebuilt only while the other is seen (below). The malleoli are never rebuilt from the shank: a
 # lost ankle came out 45 mm off on the sprint that way, where the foot gives 2 mm.
 # A name is a landmark of the segment's side ("HLE": L_HLE on the left), of the other side ("other SAE"), or one
 # of the trunk's ("TV2").
@@ -83,7 +85,17 @@ SEGMENTS = (
     ("foot", ("FAL", "TAM", "FCC", "FM2"), ()),          # the ankle's axis (malleoli), heel and toe
     ("shank", ("FLE", "FME", "TTC"), ("FAL", "TAM")),    # the knee's axis, the tibia, the ankle's axis
     ("thorax", ("SAE",), ("other SAE", "TV2", "TV12", "SME")),  # the acromion with the trunk (below)
+    ("styloids", ("RSP", "USP"), ("HLE", "HME", "UOA")),  # one styloid, while the other is seen (below)
 )
+# One styloid lost and the other seen: the wrist joint, the styloids' mean, was lost with it, and the IK stage put
+# it 19-45 mm off on average (one styloid hidden from 1 s: the sprint, the Vicon take, karate). Rebuilt from the
+# other styloid and the forearm's other markers (the bone's, FAR_END_OF), the sprint's wrist is 4-5 mm off, the
+# Vicon take's right 5-9, the Qualisys walk's 1.5-3.5. Only with at least LONE_STYLOID_PARTNERS of those others
+# seen besides the other styloid: karate's wrist bar has one elbow marker and one forearm marker, and the bar
+# turns with pronation about the forearm's line, which they do not see (its outer marker rebuilt from them came
+# out 46 / 171 mm off, against 34 / 70 for the IK stage). Both lost, the wrist is left to the IK stage (above).
+FAR_END_OF = {"styloids": "forearm"}
+LONE_STYLOID_PARTNERS = 3
 # The acromion rides the shoulder blade, which slides on the ribs, but far less than a lost one's stand-ins
 # moved: the chest then fell back to other markers (it turned up to 50 degrees in a frame on the Vicon take) and
 # the shoulder joint to the arm's IK. Shoulder hidden from 1 s (studio options): dance1 109 / 262 mm, the Vicon
@@ -180,12 +192,14 @@ N_LANDMARKS = len(LANDMARKS)
 
 
 def segment_table(tracking_of: Sequence[str] = ()
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, ...]:
     """Point indices per segment (segments x width; the rebuilt members first, then the partners and the
     bone's tracking markers, then the points used for distances only; -1 padding), and per segment how
     many are rebuilt, how many move rigidly with it, how many of the first are refined by distances, from
     which point on the tracking markers hold those distances firmly (0: the bone's own too), whether it
-    rolls about its shaft (ROLLS_ABOUT_SHAFT), and where in its row its bony pair is (BONY_PAIRS; -1: none).
+    rolls about its shaft (ROLLS_ABOUT_SHAFT), where in its row its bony pair is (BONY_PAIRS; -1: none), and,
+    for a pair each rebuilt only while the other is seen, how many other partners that needs (0: not one;
+    LONE_STYLOID_PARTNERS).
     Points are the landmarks, then the tracking markers (``tracking_of``: the segment of each, e.g.
     "L_forearm")."""
     def tracks(name):
@@ -201,19 +215,23 @@ def segment_table(tracking_of: Sequence[str] = ()
     rows, counts, pairs = [], [], []
     for side in ("L", "R"):
         for bone, rebuilt, partners in SEGMENTS:
-            rigid = [landmark(side, name) for name in rebuilt + partners] + tracks(f"{side}_{bone}")
+            own = tracks(f"{side}_{FAR_END_OF.get(bone, bone)}")
+            rigid = [landmark(side, name) for name in rebuilt + partners] + own
             refined, above, own_too = ALSO_ON.get(bone, ((), "", False))
             distance_only = tracks(f"{side}_{above}") if above else []
             assert rebuilt[:len(refined)] == refined  # the refined ones lead the rebuilt ones
             rows.append(rigid + distance_only)
+            assert bone not in FAR_END_OF or len(rebuilt) == 2  # (a pair: each rebuilt while the other is seen)
             counts.append((len(rebuilt), len(rigid), len(refined) if distance_only else 0,
-                           0 if own_too else len(rigid), bone in ROLLS_ABOUT_SHAFT))
+                           0 if own_too else len(rigid), bone in ROLLS_ABOUT_SHAFT,
+                           LONE_STYLOID_PARTNERS if bone in FAR_END_OF else 0))
             pair = BONY_PAIRS.get(bone)
             pairs.append([(rebuilt + partners).index(name) for name in pair] if pair else [-1, -1])
     width = max(map(len, rows))
     table = np.array([r + [-1] * (width - len(r)) for r in rows], np.int64)
-    rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls = (np.array(c, np.int64) for c in zip(*counts))
-    return table, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, np.array(pairs, np.int64)
+    rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, lone = (np.array(c, np.int64)
+                                                                               for c in zip(*counts))
+    return table, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, np.array(pairs, np.int64), lone
 
 
 class SegmentRebuilder:
@@ -222,7 +240,7 @@ class SegmentRebuilder:
 
     def __init__(self, tracking_of: Sequence[str] = ()):
         (self.segments, self.rebuilt_count, self.rigid_count, self.refined_count,
-         self.held_from, self.shaft_rolls, self.pairs) = segment_table(tracking_of)
+         self.held_from, self.shaft_rolls, self.pairs, self.lone) = segment_table(tracking_of)
         self.n_tracking = len(tracking_of)
         width = self.segments.shape[1]
         # per segment and member: where the segment's markers were the last time that member was
@@ -253,8 +271,8 @@ class SegmentRebuilder:
             points = np.concatenate([landmarks, tracking])
         rebuilt = np.zeros(len(points), np.bool_)
         rebuild_frame(points, self.segments, self.rebuilt_count, self.rigid_count, self.refined_count, self.held_from,
-                      self.shaft_rolls, self.pairs, self.reference, self.distance, self.last, self.slid, self.along,
-                      self.along_since, float(time_s), rebuilt)
+                      self.shaft_rolls, self.pairs, self.lone, self.reference, self.distance, self.last, self.slid,
+                      self.along, self.along_since, float(time_s), rebuilt)
         if points is not landmarks:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
@@ -272,8 +290,8 @@ class SegmentRebuilder:
 
 
 @njit(cache=True)
-def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, reference,
-                  distance, last, slid, along, along_since, time_s, rebuilt):
+def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, lone,
+                  reference, distance, last, slid, along, along_since, time_s, rebuilt):
     seen = np.zeros(segments.shape[1], np.bool_)
     before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
     weights = np.empty(segments.shape[1])
@@ -312,6 +330,8 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
         for k in range(rebuilt_count[s]):
             if seen[k] or rebuilt[seg[k]] or not vfinite(reference[s, k, k]):
                 continue
+            if lone[s] and not (seen[1 - k] and not rebuilt[seg[1 - k]]):  # (a lone styloid: the other one seen)
+                continue
             slid[s, k] = _slid(lm, seg, rigid, seen, reference[s, k], pairs[s, 0], pairs[s, 1], slid[s, k], along[s],
                                along_since[s], k, time_s)
             n, shaft = 0, 0
@@ -325,6 +345,8 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                     n += 1
             # (rolled: carried by partners i and j's line, then about it by the bone above; forearm_roll: from the
             # member's side of that line in the frame before, see ROLLS_ABOUT_SHAFT)
+            if lone[s] and n - 1 < lone[s]:
+                continue
             rolled, forearm_roll, fitted_roll, i, j = False, False, False, 0, 1
             if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
                 rot, t = rigid_fit_weighted(before, after, weights, n)
