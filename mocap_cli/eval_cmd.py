@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from mocap_cli.measure import LAYOUTS
 from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, blend_lag, gap_run, gap_windows, localize_take,
-                                    real_gap_moves, transition_moves, worst_case_timing)
+                                    measured_joints, real_gap_moves, transition_moves, worst_case_timing)
 from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
 from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
@@ -55,7 +55,8 @@ def add_parser(sub) -> None:
     g.add_argument("--profile", default="btk_sprint")
     g.add_argument("--remove", default="elbow_l", help="joint(s) to hide, comma-separated (e.g. knee_l,ankle_l; "
                    "pelvis hides every hip marker and reports the pelvis, spine0 and both hips; a landmark name "
-                   "such as L_UOA hides that marker too)")
+                   "such as L_UOA hides that marker too; landmarks alone, such as L_USP, report the joints they "
+                   "locate, here the wrist)")
     g.add_argument("--from", dest="start_s", type=float, default=1.0, help="gap start, seconds (default 1)")
     g.add_argument("--to", dest="stop_s", type=float, help="gap end, seconds (default: the end of the take)")
     g.add_argument("--solvers", default="all", help="comma-separated, or all")
@@ -164,6 +165,12 @@ def run_timing(args) -> int:
 
 
 def run_gaps(args) -> int:
+    joints = [j.strip() for j in args.remove.split(",") if j.strip()]
+    try:
+        for mode in ["markers", "joint"] if args.mode == "both" else [args.mode]:
+            measured_joints(joints, mode)
+    except ValueError as e:
+        raise SystemExit(f"--remove {args.remove}: {e}") from None
     rec = read_recording(args.take)
     profile = load_profile(args.profile)
     from mocap_core.pipeline import SkeletonPipeline
@@ -171,7 +178,6 @@ def run_gaps(args) -> int:
     pipe = SkeletonPipeline(profile, rec.labels, fill_gaps=False)
     landmarks = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
-    joints = [j.strip() for j in args.remove.split(",") if j.strip()]
     start = int(round(args.start_s * rec.rate_hz))
     stop = rec.n_frames if args.stop_s is None else min(rec.n_frames, int(round(args.stop_s * rec.rate_hz)))
     if not 0 < start < stop:

@@ -9,7 +9,7 @@ import numpy as np
 from mocap_core.gapfill import GapFiller
 from mocap_core.hip_interpolation import HIP_LANDMARKS, HipInterpolator
 from mocap_core.ik.solvers import SolverParams
-from mocap_core.localization import JOINT_LANDMARKS
+from mocap_core.localization import JOINT_LANDMARKS, JOINT_OF_LANDMARK
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, Profile
 from mocap_core.recordings import Recording
@@ -111,6 +111,29 @@ def landmarks_of(joint: str) -> list[str]:
     return [f"{side.upper()}_{name}" for name in JOINT_LANDMARKS[base]]
 
 
+def measured_joints(hidden: list[str], mode: str = "markers") -> list[str]:
+    """The joints a gap run measures for what it hides (``mocap eval gaps --remove``): the joints named (pelvis: its
+    segment), or, where only landmarks are named (L_USP), the joints those locate (wrist_l). ValueError, saying
+    why, for a name that is neither a joint nor a landmark, for a joint no marker locates (``mode`` "markers"),
+    and for landmarks that locate no joint (L_UOA alone)."""
+    if not hidden:
+        raise ValueError("nothing to remove: name a joint (elbow_l) or a landmark (L_USP)")
+    for name in hidden:
+        if name not in LANDMARK_INDEX and name not in SEGMENT_OF and name not in INDEX:
+            raise ValueError(f"cannot remove {name!r}: neither a joint ({', '.join(JOINTS)}) nor a landmark "
+                             f"(such as L_USP)")
+        if mode == "markers":
+            landmarks_of(name)  # (a joint no marker locates raises)
+    joints = [k for j in hidden if j not in LANDMARK_INDEX for k in SEGMENT_OF.get(j, (j,))]
+    if not joints:
+        located = JOINT_OF_LANDMARK[:, [LANDMARK_INDEX[j] for j in hidden]].any(axis=1)
+        joints = [JOINTS[i] for i in np.flatnonzero(located)]
+    if not joints:
+        verb = "locates" if len(hidden) == 1 else "locate"
+        raise ValueError(f"{', '.join(hidden)} {verb} no joint: name one to measure with it (e.g. elbow_l,{hidden[0]})")
+    return joints
+
+
 @dataclass
 class GapRun:
     solver: str
@@ -155,7 +178,7 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     from mocap_core.localization import Localizer
 
     hidden = joints
-    joints = [k for j in joints if j not in LANDMARK_INDEX for k in SEGMENT_OF.get(j, (j,))]
+    joints = measured_joints(hidden, mode)
     jidx = [INDEX[j] for j in joints]
     windows = gap_windows(start, stop, *(short_gaps or (stop - start, stop - start)))
     gap = np.zeros(len(landmarks), bool)

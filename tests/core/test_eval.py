@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from mocap_core.experiments import blend_lag, real_gap_moves
+from mocap_core.experiments import blend_lag, measured_joints, real_gap_moves
 from mocap_core.skeleton import INDEX, N_JOINTS, Status
 from tests.conftest import REPO, data_file
 
@@ -60,6 +60,24 @@ def test_eval_gaps_with_short_gaps(tmp_path):
     bad = mocap("eval", "gaps", "--take", str(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d")), "--profile",
                 "qualisys_sports", "--gap-length", "0.3", "--gap-every", "0.2", "--report", str(tmp_path))
     assert bad.returncode != 0 and "no more than the spacing" in bad.stderr
+
+
+def test_what_eval_gaps_measures_for_what_it_hides():
+    """Joints are measured as named (pelvis: its segment); landmarks alone, the joints they locate (a styloid: the
+    wrist); a name that is neither, a joint no marker locates, and a landmark that locates none are refused,
+    saying why, and `mocap eval gaps` says so before it reads the take (it crashed on them before stop 43)."""
+    assert measured_joints(["knee_l", "ankle_l"]) == ["knee_l", "ankle_l"]
+    assert measured_joints(["pelvis"]) == ["pelvis", "spine0", "hip_l", "hip_r"]
+    assert measured_joints(["elbow_l", "L_UOA"]) == ["elbow_l"]
+    assert measured_joints(["L_USP"]) == ["wrist_l"] and measured_joints(["R_HLE", "R_FAL"]) == ["elbow_r", "ankle_r"]
+    assert measured_joints(["spine1"], "joint") == ["spine1"]
+    for hidden, mode, says in ((["foo_l"], "markers", "neither a joint"), (["spine1"], "markers", "by markers"),
+                               (["L_UOA"], "markers", "locates no joint"), ([], "markers", "nothing to remove")):
+        with pytest.raises(ValueError, match=says):
+            measured_joints(hidden, mode)
+    for remove, says in (("foo_l", "neither a joint"), ("L_UOA", "locates no joint")):
+        r = mocap("eval", "gaps", "--remove", remove, "--report", "/nonexistent/never-written")
+        assert r.returncode != 0 and says in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
 def test_real_gap_moves_known_answer():
