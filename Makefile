@@ -88,6 +88,9 @@ results-beyond: $(STAMP)
 	$(BIN)/mocap eval gaps --remove elbow_l --from 1 $(GAPS_BEYOND) --rebuild --report docs/results/elbow_sprint_rebuild
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove foot_l --from 0.5 --to 1.5 $(GAPS_BEYOND) --rebuild --report docs/results/heel_walk_rebuild
+	$(BIN)/mocap eval gaps --remove L_USP --from 1 $(GAPS_BEYOND) --rebuild --report docs/results/styloid_sprint_rebuild
+	$(BIN)/mocap eval gaps --take ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d \
+		--profile vicon53 --remove R_USP --from 1 $(GAPS_BEYOND) --rebuild --report docs/results/styloid_vicon_rebuild_r
 	$(BIN)/mocap eval gaps --take ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
 		--remove pelvis --from 0.5 --to 2.0 --solvers ccd --constraints on --mode markers --hips-lost fit \
 		--report docs/results/pelvis_walk_fit
