@@ -76,8 +76,9 @@ REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel o
 # the shank's partners include the malleoli the foot may have rebuilt just before. The profile's
 # tracking markers of a bone (wands, clusters) join it as partners. The styloids help the forearm: both
 # rebuilt from the elbow's markers, a lost wrist came out 27 mm off on the sprint where the IK stage's swivel
-# gives 13 mm (the radius turns about the ulna); one is rebuilt only while the other is seen (below). The malleoli are never rebuilt from the shank: a
-# lost ankle came out 45 mm off on the sprint that way, where the foot gives 2 mm.
+# gives 13 mm (the radius turns about the ulna); one is rebuilt only while the other is seen (below). The
+# malleoli are never rebuilt from the shank: a lost ankle came out 45 mm off on the sprint that way, where the
+# foot gives 2 mm.
 # A name is a landmark of the segment's side ("HLE": L_HLE on the left), of the other side ("other SAE"), or one
 # of the trunk's ("TV2").
 SEGMENTS = (
@@ -89,11 +90,12 @@ SEGMENTS = (
 )
 # One styloid lost and the other seen: the wrist joint, the styloids' mean, was lost with it, and the IK stage put
 # it 19-45 mm off on average (one styloid hidden from 1 s: the sprint, the Vicon take, karate). Rebuilt from the
-# other styloid and the forearm's other markers (the bone's, FAR_END_OF), the sprint's wrist is 4-5 mm off, the
-# Vicon take's right 5-9, the Qualisys walk's 1.5-3.5. Only with at least LONE_STYLOID_PARTNERS of those others
-# seen besides the other styloid: karate's wrist bar has one elbow marker and one forearm marker, and the bar
-# turns with pronation about the forearm's line, which they do not see (its outer marker rebuilt from them came
-# out 46 / 171 mm off, against 34 / 70 for the IK stage). Both lost, the wrist is left to the IK stage (above).
+# other styloid and the forearm's other markers (its tracking markers too: FAR_END_OF names the bone whose they
+# are), the sprint's wrist is 4-5 mm off, the Vicon take's right 5-9, the Qualisys walk's 1.5-3.5. Only with at
+# least LONE_STYLOID_PARTNERS of those others seen besides the other styloid: karate's wrist bar has one elbow
+# marker and one forearm marker, and the bar turns with pronation about the forearm's line, which they do not
+# see (its outer marker rebuilt from them came out 46 / 171 mm off, against 34 / 70 for the IK stage). Both
+# lost, the wrist is left to the IK stage (above).
 FAR_END_OF = {"styloids": "forearm"}
 LONE_STYLOID_PARTNERS = 3
 # The acromion rides the shoulder blade, which slides on the ribs, but far less than a lost one's stand-ins

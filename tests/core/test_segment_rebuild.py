@@ -359,8 +359,8 @@ def test_a_lone_styloid_is_rebuilt_from_the_other_and_the_forearm_known_answer()
     """One styloid lost, the other seen: the wrist joint (their mean) would be lost with it. A forearm turned and
     moved, its ulnar styloid lost: rebuilt exactly from the radial one, the elbow's markers, the olecranon and the
     forearm's marker. Both lost: neither is (the wrist is left to the IK stage). With under three partners besides
-    the other styloid (karate's set: one elbow marker, one forearm marker; here the elbow's lateral marker alone, no forearm
-    marker): not rebuilt either."""
+    the other styloid (karate's set: one elbow marker, one forearm marker; here the elbow's lateral marker alone,
+    no forearm marker): not rebuilt either."""
     first, wand, _, _ = _slid_forearm()
     hle, hme, uoa, rsp, usp = FOREARM
     turn, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.4, 0.1, 1.0])
