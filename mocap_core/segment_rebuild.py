@@ -94,7 +94,7 @@ SEGMENTS = (
 # are), the sprint's wrist is 4-5 mm off, the Vicon take's right 5-9, the Qualisys walk's 1.5-3.5. Only with at
 # least LONE_STYLOID_PARTNERS of those others seen besides the other styloid: karate's wrist bar has one elbow
 # marker and one forearm marker, and the bar turns with pronation about the forearm's line, which they do not
-# see (its outer marker rebuilt from them came out 46 / 171 mm off, against 34 / 70 for the IK stage). Both
+# see (its radial-side marker rebuilt from them came out 46 / 171 mm off, against 34 / 70 for the IK stage). Both
 # lost, the wrist is left to the IK stage (above).
 FAR_END_OF = {"styloids": "forearm"}
 LONE_STYLOID_PARTNERS = 3
