@@ -408,7 +408,7 @@ def _slid(lm, seg, rigid, seen, reference, i, j, before, along, along_since, k, 
     sliding = -1
     if others and max(moved_i, moved_j) > max(SLID_ALONG_M, SLID_ALONG_RATIO * min(moved_i, moved_j)):
         sliding = i if moved_i > moved_j else j
-    if sliding != along[k]:
+    if sliding != along[k] or time_s < along_since[k]:  # (a stream restarted, its clock with it: start over)
         along[k], along_since[k] = sliding, time_s
     if _stretch(lm, seg, reference, i, j) <= SLID_M:
         return sliding if sliding >= 0 and time_s - along_since[k] >= SLID_ALONG_S else -1

@@ -334,6 +334,26 @@ def test_a_styloid_slid_with_the_spacing_kept_is_left_out_after_a_quarter_second
             assert (errors > 0.005).all(), errors
 
 
+def test_a_slide_is_timed_again_when_the_clock_goes_back():
+    """A stream restarted (a bag played again) brings its clock back: a slide timed before it is timed again from
+    there, so it is left out 0.25 s after the restart, not at once."""
+    first, wand, _, _ = _slid_forearm()
+    hle, hme, uoa, rsp, usp = FOREARM
+    turn, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.4, 0.1, 1.0])
+    moved, moved_wand = _slide_along(first, wand, turn, shift)
+    truth = first @ turn.T + shift
+    rebuilder = SegmentRebuilder(("L_forearm", "L_forearm"))
+    rebuilder.fill(first.copy(), wand.copy(), 10.0)
+    errors = []
+    for t in [10.1, 10.2, 10.3, 10.4] + [0.0, 0.1, 0.2, 0.3]:
+        lost = moved.copy()
+        lost[[hle, hme, uoa]] = np.nan
+        rebuilder.fill(lost, moved_wand.copy(), t)
+        errors.append(np.linalg.norm(lost[hle] - truth[hle]))
+    assert errors[0] > 0.005 and errors[3] < 1e-9, errors  # in at 10.1 s, out from 10.35 s
+    assert errors[4] > 0.005 and errors[6] > 0.005 and errors[7] < 1e-9, errors  # timed again from 0 s
+
+
 def test_a_styloid_swung_against_the_forearm_for_less_than_a_quarter_second_stays_in():
     """The same slide for 0.2 s, then back, then again: each run of it is shorter than SLID_ALONG_S, so the
     marker is never left out (a strike's skin swing on the karate take's wrist bar)."""
