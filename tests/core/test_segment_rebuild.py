@@ -296,14 +296,32 @@ def test_epicondyles_keep_their_learned_distances_to_the_upper_arm():
     assert rigid_off == pytest.approx(0.008) and off < 0.9 * rigid_off, (off, rigid_off)
 
 
-def _slide_along(first, wand, turn, shift):
-    """The frame turned and moved, its ulnar styloid marker slid 28 mm up the forearm about the radial one, the
-    styloids' spacing kept exactly."""
+def _slide_along():
+    """The forearm of _slid_forearm, seen at 0 s, then turned and moved, its ulnar styloid marker slid 28 mm up the
+    forearm about the radial one, the styloids' spacing kept exactly: the slid frame and its forearm markers, the
+    frame as it would be unslid, and a rebuilder that has seen the first frame at ``start_s``."""
+    first, wand, _, _ = _slid_forearm()
     hle, hme, uoa, rsp, usp = FOREARM
+    turn, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.4, 0.1, 1.0])
     slid = first.copy()
     offset = np.array([0.05, 0.03, -0.05])
     slid[usp] = first[rsp] + offset * np.linalg.norm(first[usp] - first[rsp]) / np.linalg.norm(offset)
-    return slid @ turn.T + shift, wand @ turn.T + shift
+    return slid @ turn.T + shift, wand @ turn.T + shift, first @ turn.T + shift, first, wand
+
+
+def _sliding_rebuilder(first, wand, start_s):
+    rebuilder = SegmentRebuilder(("L_forearm", "L_forearm"))
+    rebuilder.fill(first.copy(), wand.copy(), start_s)
+    return rebuilder
+
+
+def _elbow_off(rebuilder, frame, wand, time_s, truth):
+    """How far the lateral epicondyle, lost with the other elbow markers in ``frame``, is rebuilt from ``truth``."""
+    hle, hme, uoa, rsp, usp = FOREARM
+    lost = frame.copy()
+    lost[[hle, hme, uoa]] = np.nan
+    assert rebuilder.fill(lost, wand.copy(), time_s)[hle]
+    return np.linalg.norm(lost[hle] - truth[hle])
 
 
 def test_a_styloid_slid_with_the_spacing_kept_is_left_out_after_a_quarter_second_known_answer():
@@ -312,21 +330,11 @@ def test_a_styloid_slid_with_the_spacing_kept_is_left_out_after_a_quarter_second
     is taken as skin swinging in a strike and the marker stays in the fit, which puts the elbow over 5 mm off;
     from then on it is left out, and the radial styloid and the forearm's markers carry the elbow exactly.
     Without the frames' times it is never left out."""
-    first, wand, _, _ = _slid_forearm()
-    hle, hme, uoa, rsp, usp = FOREARM
-    turn, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.4, 0.1, 1.0])
-    moved, moved_wand = _slide_along(first, wand, turn, shift)
-    truth = first @ turn.T + shift
+    moved, moved_wand, truth, first, wand = _slide_along()
     for timed in (True, False):
-        rebuilder = SegmentRebuilder(("L_forearm", "L_forearm"))
-        rebuilder.fill(first.copy(), wand.copy(), 0.0 if timed else np.nan)
-        errors = []
-        for f in range(1, 41):
-            lost = moved.copy()
-            lost[[hle, hme, uoa]] = np.nan
-            assert rebuilder.fill(lost, moved_wand.copy(), f / 100 if timed else np.nan)[hle]
-            errors.append(np.linalg.norm(lost[hle] - truth[hle]))
-        errors = np.array(errors)
+        rebuilder = _sliding_rebuilder(first, wand, 0.0 if timed else np.nan)
+        errors = np.array([_elbow_off(rebuilder, moved, moved_wand, f / 100 if timed else np.nan, truth)
+                           for f in range(1, 41)])
         assert (errors[:24] > 0.005).all(), errors  # 0.01-0.24 s: in the fit
         if timed:
             np.testing.assert_allclose(errors[25:], 0.0, atol=1e-9)  # 0.26 s on: left out
@@ -337,19 +345,9 @@ def test_a_styloid_slid_with_the_spacing_kept_is_left_out_after_a_quarter_second
 def test_a_slide_is_timed_again_when_the_clock_goes_back():
     """A stream restarted (a bag played again) brings its clock back: a slide timed before it is timed again from
     there, so it is left out 0.25 s after the restart, not at once."""
-    first, wand, _, _ = _slid_forearm()
-    hle, hme, uoa, rsp, usp = FOREARM
-    turn, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.4, 0.1, 1.0])
-    moved, moved_wand = _slide_along(first, wand, turn, shift)
-    truth = first @ turn.T + shift
-    rebuilder = SegmentRebuilder(("L_forearm", "L_forearm"))
-    rebuilder.fill(first.copy(), wand.copy(), 10.0)
-    errors = []
-    for t in [10.1, 10.2, 10.3, 10.4] + [0.0, 0.1, 0.2, 0.3]:
-        lost = moved.copy()
-        lost[[hle, hme, uoa]] = np.nan
-        rebuilder.fill(lost, moved_wand.copy(), t)
-        errors.append(np.linalg.norm(lost[hle] - truth[hle]))
+    moved, moved_wand, truth, first, wand = _slide_along()
+    rebuilder = _sliding_rebuilder(first, wand, 10.0)
+    errors = [_elbow_off(rebuilder, moved, moved_wand, t, truth) for t in [10.1, 10.2, 10.3, 10.4, 0.0, 0.1, 0.2, 0.3]]
     assert errors[0] > 0.005 and errors[3] < 1e-9, errors  # in at 10.1 s, out from 10.35 s
     assert errors[4] > 0.005 and errors[6] > 0.005 and errors[7] < 1e-9, errors  # timed again from 0 s
 
@@ -357,22 +355,15 @@ def test_a_slide_is_timed_again_when_the_clock_goes_back():
 def test_a_styloid_swung_against_the_forearm_for_less_than_a_quarter_second_stays_in():
     """The same slide for 0.2 s, then back, then again: each run of it is shorter than SLID_ALONG_S, so the
     marker is never left out (a strike's skin swing on the karate take's wrist bar)."""
-    first, wand, _, _ = _slid_forearm()
-    hle, hme, uoa, rsp, usp = FOREARM
-    turn, shift = rotation([0.3, 1, -0.2], 0.8), np.array([0.4, 0.1, 1.0])
-    moved, moved_wand = _slide_along(first, wand, turn, shift)
-    back = first @ turn.T + shift
-    rebuilder = SegmentRebuilder(("L_forearm", "L_forearm"))
-    rebuilder.fill(first.copy(), wand.copy(), 0.0)
+    moved, moved_wand, back, first, wand = _slide_along()
+    rebuilder = _sliding_rebuilder(first, wand, 0.0)
     for f in range(1, 61):
         swung = (f // 20) % 2 == 0  # 0.01-0.19 s and 0.40-0.59 s swung, 0.20-0.39 s back
-        lost = (moved if swung else back).copy()
-        lost[[hle, hme, uoa]] = np.nan
-        rebuilder.fill(lost, moved_wand.copy(), f / 100)
+        off = _elbow_off(rebuilder, moved if swung else back, moved_wand, f / 100, back)
         if swung:
-            assert np.linalg.norm(lost[hle] - back[hle]) > 0.005, f  # the slid marker still pulls the fit
+            assert off > 0.005, f  # the slid marker still pulls the fit
         else:
-            np.testing.assert_allclose(lost[hle], back[hle], atol=1e-9)
+            assert off < 1e-9, f
 
 
 def test_a_lone_styloid_is_rebuilt_from_the_other_and_the_forearm_known_answer():
