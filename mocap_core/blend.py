@@ -245,6 +245,13 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             since_loss[k] = math.inf
         offset[k] -= raw - heading
         offset_vel[k] = 0.0  # a new offset, eased from rest
+        corrected = vnorm(offset[k])
+        if jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and corrected > 0:
+            # an estimate that jumps within itself has corrected itself (a rebuild whose partners changed), where a
+            # held joint that jumps was taken up by another bone: its offset starts closing at once, at the step
+            # cap's pace. Eased from rest, the Vicon take's left elbow went on 103 mm off for 0.1 s after its
+            # rebuild had come back to 4 mm in a 4-5 m/s swing (stop 44; 80 mm so)
+            offset_vel[k] = offset[k] * (-step / dt / corrected)
         since = seen_age[k, kind]  # frames since this kind of source was last seen
         if found_or_lost and since <= FLICKER_FRAMES:
             _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
@@ -356,7 +363,9 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     where they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
     stop 23). Markers that come back while the output is still leaving that course are met from the output as it
     went (its own last step), not as the fill went. An estimate that leaves its course faster than
-    SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way; one handed
+    SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way (an estimate
+    that so jumps within itself has corrected itself: with ``step`` set, its offset closes from the first frame at
+    that pace, stop 44); one handed
     between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
     then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
     hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones

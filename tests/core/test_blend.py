@@ -129,6 +129,37 @@ def test_an_estimate_that_jumps_to_another_source_mid_gap_is_met_smoothly_known_
     assert np.linalg.norm(out[-1] - truth[-1] - BIAS - jump) < 1e-4                   # then the new source
 
 
+def test_an_estimate_that_corrects_itself_closes_its_offset_at_once_known_answer():
+    """An estimate that jumps within itself has corrected itself (the Vicon take's rebuilt left elbow, back from
+    61 to 4 mm off in a 4-5 m/s swing): with the step cap set, its offset starts closing at the cap's pace in the
+    first frame, where a held joint's jump (another bone took it up) is eased from rest."""
+    rate_hz, jump_at, step = 120.0, 30, 0.01
+    jump = np.array([0.0, 0.0, 0.1])  # (over SOURCE_JUMP_M_S: 83 mm a frame at 120 Hz)
+    bias = lambda f: BIAS + (jump if f >= jump_at else 0.0)  # noqa: E731
+    runs = {}
+    for fill in (ESTIMATED, HELD):
+        out, truth = run(rate_hz, range(10, 10_000), step=step, bias=bias, frames=150, fill=lambda f, s=fill: s)
+        source = truth + np.array([bias(f) for f in range(150)])
+        steps = np.diff(out, axis=0)
+        np.testing.assert_allclose(steps[jump_at - 1], steps[jump_at - 2], atol=1e-12)  # goes on as it went
+        extra = np.linalg.norm(steps - np.diff(truth, axis=0), axis=1)
+        assert extra.max() <= step + 1e-12  # never faster than the cap
+        runs[fill] = out - source
+    omega = blend.BLEND_X / HALF_LIFE
+    dt = 1.0 / rate_hz
+    start = runs[ESTIMATED][jump_at]
+    at_cap = start * (-step / dt / np.linalg.norm(start))  # the offset's velocity: closing at the cap's pace
+    expected, _ = blend.spring_step(start, at_cap, omega, dt, math.exp(-omega * dt))
+    moved = np.linalg.norm(expected - start)  # (at most the cap: here the spring's own pace, 9.6 mm)
+    np.testing.assert_allclose(runs[ESTIMATED][jump_at + 1], start + (expected - start) * min(1.0, step / moved),
+                               atol=1e-12)
+    closed = {fill: np.linalg.norm(runs[fill][jump_at]) - np.linalg.norm(runs[fill][jump_at + 1]) for fill in runs}
+    assert closed[ESTIMATED] > 0.009 and closed[HELD] < 0.001  # (from rest: 1 % of the jump)
+    half = {fill: np.argmax(np.linalg.norm(runs[fill][jump_at:], axis=1) < 0.05) for fill in runs}
+    assert half[ESTIMATED] <= half[HELD] - 4  # half the jump eased out 4 frames sooner (6 against 11)
+    assert np.linalg.norm(runs[ESTIMATED][-1]) < 1e-4  # then the new source
+
+
 def test_a_fill_handed_to_another_mid_gap_is_met_smoothly_known_answer():
     """A held hand taken up by an estimate 60 mm away (7.2 m/s at 120 Hz, under SOURCE_JUMP_M_S; the Vicon
     take's right wrist at frame 979): the hand-over's jump is eased in, where the same jump within one
