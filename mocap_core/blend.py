@@ -40,6 +40,14 @@ DEFAULT_FRAME_S = 0.01
 # 13-15 mm. Without the weight (a fixed ease over 0.2 s) the sprint was 31 mm; the miss of the raw fill
 # instead of the output's, the sprint 6.2; the course's own misses at returns learned too, 8.3.
 COURSE_K = 3.0
+# An estimate given up for a hold starts a course too (stop 29), on the estimate's last step; that step dies out
+# with this time constant. A fill's step says less of where a limb goes than its markers' did, and an arm that
+# loses its estimate often does so slowing down: the Vicon take's left elbow (hidden from 1 s), its forearm's and
+# hand's markers lost for 15 frames at 2.8 s while the arm slowed from 24 to 5 mm a frame, went on at 25 mm a
+# frame and came 103 mm off, where the hold was 28-44 mm off (stop 44: 81 so; 0.1 s: 87; 0.025 s: 80, and the
+# kicking right knee's maximum 175 -> 186 mm, 181 so). Every course dying out so took dance1's ankle back from
+# short gaps at 1.56x its normal step (1.41x): a loss of the markers keeps its course.
+HOLD_COURSE_S = 0.05
 ACCEL_FLOOR = 1.0       # m/s^2
 FILL_SD_PRIOR = 0.01    # metres
 # reacquire_step_m caps how far the blend moves the output off its source in a frame; a source moving over
@@ -85,6 +93,7 @@ class BlendState:
     prev_raw: np.ndarray      # (n, 3) the source's position a frame before last_raw
     prev_vel: np.ndarray      # (n, 3) and its step then
     course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
+    held_course: np.ndarray   # (n,) bool: that course began where an estimate was given up for a hold
     last_frame: np.ndarray    # (n, 3, 3) the last output bone frame (NaN: none)
     turn_axis: np.ndarray     # (n, 3) the frame's offset where its source changed: a turn about this axis
     turn: np.ndarray          # (n, 3) by this angle (radians, column 0) times the spring's share (1), and its
@@ -100,7 +109,7 @@ class BlendState:
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
-                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan),
+                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan), np.zeros(n, bool),
                    np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
                    BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
@@ -125,7 +134,8 @@ class BlendState:
         blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
                           self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
                           self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
-                          self.frame_s, self.course_on, self.prev_raw, self.prev_vel, self.course_len)
+                          self.frame_s, self.course_on, self.prev_raw, self.prev_vel, self.course_len,
+                          self.held_course)
 
 
 @njit(cache=True)
@@ -190,7 +200,7 @@ def _take_step(velocity, step, last_step, limit):
 @njit(cache=True)
 def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
                   course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on, prev_raw, prev_vel,
-                  course_len, neighbours):
+                  course_len, held_course, neighbours):
     """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
     a loss, eased from the markers' course into that (see blend_transitions). ``neighbours``: the joints
     before and after it in the chain, where both are located (else NaN)."""
@@ -275,6 +285,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     p += offset[k]
     if (lost or gave_up) and course_on and trust[k, ACC_N] > 0:
         course[k], course_step[k], since_loss[k], eased[k] = p, before_step, 0.0, 0.0
+        held_course[k] = gave_up
         course_len[k, 0] = vnorm(p - neighbours[0])  # (NaN unless both are located)
         course_len[k, 1] = vnorm(neighbours[1] - p)
     elif since_loss[k] < math.inf:
@@ -299,6 +310,8 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
                 course[k] = mv(rot, course[k] - course_step[k]) + shift
         else:
             course_len[k] = np.nan
+        if held_course[k]:  # (a hold's course: its step dies out, HOLD_COURSE_S)
+            course_step[k] *= math.exp(-dt / HOLD_COURSE_S)
         w = course_weight(since_loss[k], trust[k])
         w = 1.0 if w >= EASED else w
         apart = vnorm(p - course[k])
@@ -347,7 +360,7 @@ def _linear_return(p, s, was, last, offset, step):
 @njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
                       has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
-                      course_on, prev_raw, prev_vel, course_len):
+                      course_on, prev_raw, prev_vel, course_len, held_course):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -365,18 +378,18 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     went (its own last step), not as the fill went. An estimate that leaves its course faster than
     SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way (an estimate
     that so jumps within itself has corrected itself: with ``step`` set, its offset closes from the first frame at
-    that pace, stop 44); one handed
-    between fills (estimated, held) without such a jump has its jump taken into the offset (since stop 25; until
-    then it was not met). An estimate given up for a hold starts a course as a loss does, and one back from a
-    hold ends a course as returning markers do (stop 29). The course of a lone joint between two located ones
-    keeps its distances to them, on their circle (stop 30); out of their reach, it moves with their line (stop
-    39). While a fill stands in, the output stays within MAX_APART_M of it (stop 31). A flickering marker swings
-    the offset back and forth by the two sources' difference: nothing builds up.
+    that pace, stop 44); one handed between fills (estimated, held) without such a jump has its jump taken into
+    the offset (since stop 25; until then it was not met). An estimate given up for a hold starts a course as a
+    loss does, its step dying out (HOLD_COURSE_S, since stop 44), and one back from a hold ends a course as
+    returning markers do (stop 29). The course of a lone joint between two located ones keeps its distances to
+    them, on their circle (stop 30); out of their reach, it moves with their line (stop 39). While a fill stands
+    in, the output stays within MAX_APART_M of it (stop 31). A flickering marker swings the offset back and forth
+    by the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
     markers' course after a loss and how far the output has left it; ``course_len``, a lone joint's distances to
-    its neighbours where the course began."""
+    its neighbours where the course began; ``held_course``, whether it began at a hold."""
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
     neighbours = np.empty((2, 3))
@@ -402,7 +415,7 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
                 neighbours[1] = positions[idx[k + 1]]
             _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
                           offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on,
-                          prev_raw, prev_vel, course_len, neighbours)
+                          prev_raw, prev_vel, course_len, held_course, neighbours)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):

@@ -191,20 +191,22 @@ def _estimated_then_held(rate_hz: float, hold_at: int, course: bool = True, lost
 
 def test_an_estimate_given_up_for_a_hold_goes_on_along_its_course_known_answer():
     """A hold knows nothing of where the joint went: the output goes on along the estimate's course (its
-    last step, on and on) and leaves it for the hold only as course_weight says, as after a loss of the
-    markers. Before stop 29 it became the hold plus an offset dying out, and fell behind at once (the Vicon
-    take's right knee 215 mm off after four held frames, then 260 mm to ease out once the estimate came
-    back: 31 -> 29 mm over its long test gap)."""
+    last step, dying out with HOLD_COURSE_S) and leaves it for the hold only as course_weight says, as after a
+    loss of the markers. Before stop 29 it became the hold plus an offset dying out, and fell behind at once (the
+    Vicon take's right knee 215 mm off after four held frames, then 260 mm to ease out once the estimate came
+    back: 31 -> 29 mm over its long test gap). Until stop 44 the step did not die out, and an arm slowing down
+    as it lost its estimate overshot (the Vicon take's left elbow: 103 mm off where the hold was 44)."""
     rate_hz, hold_at = 120.0, 100
     out, truth = _estimated_then_held(rate_hz, hold_at)
     omega = blend.BLEND_X / HALF_LIFE
     step = VELOCITY / rate_hz
+    dies = math.exp(-1.0 / rate_hz / blend.HOLD_COURSE_S)  # the course's step, a frame later
     def spring(n):  # the hold plus the spring's offset (the hand-over's jump, one step), eased from that frame
         t = (n + 1) / rate_hz
         return truth[hold_at - 1] + step * (1 + omega * t) * math.exp(-omega * t)
     for f in range(hold_at, len(out)):
         n = f - hold_at
-        course = spring(0) + step * n  # from where the output was, on at the estimate's last step
+        course = spring(0) + step * (1 - dies ** n) / (1 - dies)  # from where the output was, on at a dying step
         t = n / rate_hz
         stray = blend.COURSE_K * 0.5 * blend.ACCEL_FLOOR * t * t
         weight = stray ** 2 / (stray ** 2 + blend.FILL_SD_PRIOR ** 2)
@@ -212,7 +214,7 @@ def test_an_estimate_given_up_for_a_hold_goes_on_along_its_course_known_answer()
         np.testing.assert_allclose(out[f], course + weight * (spring(n) - course), atol=1e-12)
     spring_alone, _ = _estimated_then_held(rate_hz, hold_at, course=False)
     ahead = hold_at + 4
-    assert np.linalg.norm(out[ahead] - truth[ahead]) < 0.002
+    assert np.linalg.norm(out[ahead] - truth[ahead]) < 0.005  # (a step behind: 3 of the truth's 4 gone on)
     assert np.linalg.norm(spring_alone[ahead] - truth[ahead]) > 0.015  # (four steps behind, less the spring)
 
 
