@@ -255,13 +255,12 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             since_loss[k] = math.inf
         offset[k] -= raw - heading
         offset_vel[k] = 0.0  # a new offset, eased from rest
-        corrected = vnorm(offset[k])
-        if jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and corrected > 0:
+        if jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and vnorm(offset[k]) > 0:
             # an estimate that jumps within itself has corrected itself (a rebuild whose partners changed), where a
             # held joint that jumps was taken up by another bone: its offset starts closing at once, at the step
             # cap's pace. Eased from rest, the Vicon take's left elbow went on 103 mm off for 0.1 s after its
             # rebuild had come back to 4 mm in a 4-5 m/s swing (stop 44; 80 mm so)
-            offset_vel[k] = offset[k] * (-step / dt / corrected)
+            offset_vel[k] = offset[k] * (-step / dt / vnorm(offset[k]))
         since = seen_age[k, kind]  # frames since this kind of source was last seen
         if found_or_lost and since <= FLICKER_FRAMES:
             _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
