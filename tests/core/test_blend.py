@@ -506,6 +506,57 @@ def test_a_lone_joints_course_keeps_its_distances_to_its_located_neighbours_know
     assert on_circle[-1] < off_line[-1] / 4, (on_circle[-1], off_line[-1])
 
 
+def _end_lost(rate_hz: float, lost_at: int, parent_lost_at: int = 10_000, frames: int = 80):
+    """The same swinging arm with the wrist, its end joint, lost from ``lost_at`` (its estimate BIAS off) and the
+    elbow, its parent, from ``parent_lost_at`` (its estimate where it is). Returns per frame the blend's course for
+    the wrist, whether one runs, and the truth."""
+    state = blend.BlendState.empty(3, 0.01, HALF_LIFE, True)
+    courses, running, truths = [], [], []
+    for f in range(frames):
+        state.advance_clock(f / rate_hz)
+        angle = 2 * math.pi * SWING_HZ * f / rate_hz
+        elbow = START + 0.3 * np.array([math.cos(angle), math.sin(angle), 0.0])
+        truth = np.array([START, elbow, elbow + 0.25 * np.array([math.cos(angle + 0.6), math.sin(angle + 0.6), 0.0])])
+        positions, status = truth.copy(), np.full(3, LOCATED, np.int64)
+        if f >= lost_at:
+            positions[2] += BIAS
+            status[2] = ESTIMATED
+        if f >= parent_lost_at:
+            status[1] = ESTIMATED
+        state.blend(positions, status, np.arange(3))
+        courses.append(state.course[2].copy())
+        running.append(state.since_loss[2] < math.inf)
+        truths.append(truth)
+    return np.array(courses), np.array(running), np.array(truths)
+
+
+def test_an_end_joints_course_keeps_its_distance_to_its_located_parent_known_answer():
+    """A wrist (the limb's end) lost while the arm swings: its markers' straight course flies off the forearm; held
+    to its distance from the located elbow (as where the course began), it turns with it. Stop 44: the Vicon take's
+    left hand fell 290 mm behind its fill on a straight course, and was 283 mm off its markers when they came back
+    (151 with this)."""
+    rate_hz, lost_at = 120.0, 20
+    course, running, truth = _end_lost(rate_hz, lost_at)
+    after = np.flatnonzero(running)
+    assert after[0] == lost_at and len(after) >= 8
+    reach = np.linalg.norm(course[lost_at] - truth[lost_at, 1])
+    for f in after:
+        assert np.linalg.norm(course[f] - truth[f, 1]) == pytest.approx(reach, abs=1e-12)
+    straight = course[lost_at] + np.outer(after - lost_at, truth[lost_at - 1, 2] - truth[lost_at - 2, 2])
+    on_sphere = np.linalg.norm(course[after] - truth[after, 2], axis=1)
+    off_line = np.linalg.norm(straight - truth[after, 2], axis=1)
+    assert on_sphere[-1] < off_line[-1] / 2, (on_sphere[-1], off_line[-1])
+
+
+def test_an_end_joints_course_goes_on_straight_once_its_parent_is_lost():
+    rate_hz, lost_at, parent_lost_at = 120.0, 20, 24
+    course, running, truth = _end_lost(rate_hz, lost_at, parent_lost_at)
+    assert running[parent_lost_at:parent_lost_at + 3].all()
+    markers_step = truth[lost_at - 1, 2] - truth[lost_at - 2, 2]
+    steps = np.diff(course[parent_lost_at - 1:parent_lost_at + 3], axis=0)
+    np.testing.assert_allclose(steps, np.tile(markers_step, (3, 1)), atol=1e-12)
+
+
 def test_a_lone_joints_course_goes_on_straight_once_a_neighbour_is_lost():
     """The wrist lost too, mid-course: the elbow's course goes on from where it was at its step, without a jump."""
     rate_hz, lost_at, wrist_lost_at = 120.0, 20, 24
