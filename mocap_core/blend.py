@@ -302,7 +302,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # 1.50x its own pace (1.15x now). An end joint (a hand, a toe) lost while its parent is located keeps its
         # distance to it, as the lone joint does to both (stop 44): the Vicon take's left hand, lost for 9 frames
         # at 318 while the arm swung, fell 290 mm behind its fill on its markers' straight course, and was still 283
-        # mm off its markers after they came back (150 so).
+        # mm off its markers after they came back (151 so).
         if all_finite(course_len[k]) and all_finite(neighbours):
             if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
                 course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],
