@@ -457,12 +457,14 @@ def test_nearest_on_circle_known_answer():
 SWING_HZ = 1.0  # turns a second
 
 
-def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: int = 80, stretch: float = 0.0):
+def _swing(rate_hz: float, lost_at: int, other_lost_at: int = 10_000, frames: int = 80, stretch: float = 0.0,
+           lost: int = 1):
     """A shoulder, elbow and wrist (a bent arm: bones 0.3 and 0.25 m, 0.6 rad apart) swinging rigidly about the
-    shoulder at a turn a second; the elbow's markers lost from ``lost_at``, its estimate BIAS off; the
-    wrist's from ``wrist_lost_at``, its estimate where it is; from ``lost_at`` on the wrist goes ``stretch``
-    metres a frame further out from the shoulder (skin sliding). Returns per frame the blend's course for the
-    elbow, whether one runs, and the truth (frames x 3 joints x 3)."""
+    shoulder at a turn a second; joint ``lost`` (1 the elbow, 2 the wrist, the limb's end) has its markers lost from
+    ``lost_at``, its estimate BIAS off; the other of the two from ``other_lost_at``, its estimate where it is; from
+    ``lost_at`` on the wrist goes ``stretch`` metres a frame further out from the shoulder (skin sliding). Returns
+    per frame the blend's course for joint ``lost``, whether one runs, and the truth (frames x 3 joints x 3)."""
+    other = 3 - lost
     state = blend.BlendState.empty(3, 0.01, HALF_LIFE, True)
     courses, running, truths = [], [], []
     for f in range(frames):
@@ -475,13 +477,13 @@ def _swing(rate_hz: float, lost_at: int, wrist_lost_at: int = 10_000, frames: in
         positions = truth.copy()
         status = np.full(3, LOCATED, np.int64)
         if f >= lost_at:
-            positions[1] += BIAS
-            status[1] = ESTIMATED
-        if f >= wrist_lost_at:
-            status[2] = ESTIMATED
+            positions[lost] += BIAS
+            status[lost] = ESTIMATED
+        if f >= other_lost_at:
+            status[other] = ESTIMATED
         state.blend(positions, status, np.arange(3))
-        courses.append(state.course[1].copy())
-        running.append(state.since_loss[1] < math.inf)
+        courses.append(state.course[lost].copy())
+        running.append(state.since_loss[lost] < math.inf)
         truths.append(truth)
     return np.array(courses), np.array(running), np.array(truths)
 
@@ -506,37 +508,13 @@ def test_a_lone_joints_course_keeps_its_distances_to_its_located_neighbours_know
     assert on_circle[-1] < off_line[-1] / 4, (on_circle[-1], off_line[-1])
 
 
-def _end_lost(rate_hz: float, lost_at: int, parent_lost_at: int = 10_000, frames: int = 80):
-    """The same swinging arm with the wrist, its end joint, lost from ``lost_at`` (its estimate BIAS off) and the
-    elbow, its parent, from ``parent_lost_at`` (its estimate where it is). Returns per frame the blend's course for
-    the wrist, whether one runs, and the truth."""
-    state = blend.BlendState.empty(3, 0.01, HALF_LIFE, True)
-    courses, running, truths = [], [], []
-    for f in range(frames):
-        state.advance_clock(f / rate_hz)
-        angle = 2 * math.pi * SWING_HZ * f / rate_hz
-        elbow = START + 0.3 * np.array([math.cos(angle), math.sin(angle), 0.0])
-        truth = np.array([START, elbow, elbow + 0.25 * np.array([math.cos(angle + 0.6), math.sin(angle + 0.6), 0.0])])
-        positions, status = truth.copy(), np.full(3, LOCATED, np.int64)
-        if f >= lost_at:
-            positions[2] += BIAS
-            status[2] = ESTIMATED
-        if f >= parent_lost_at:
-            status[1] = ESTIMATED
-        state.blend(positions, status, np.arange(3))
-        courses.append(state.course[2].copy())
-        running.append(state.since_loss[2] < math.inf)
-        truths.append(truth)
-    return np.array(courses), np.array(running), np.array(truths)
-
-
 def test_an_end_joints_course_keeps_its_distance_to_its_located_parent_known_answer():
     """A wrist (the limb's end) lost while the arm swings: its markers' straight course flies off the forearm; held
     to its distance from the located elbow (as where the course began), it turns with it. Stop 44: the Vicon take's
     left hand fell 290 mm behind its fill on a straight course, and was 283 mm off its markers when they came back
     (151 with this)."""
     rate_hz, lost_at = 120.0, 20
-    course, running, truth = _end_lost(rate_hz, lost_at)
+    course, running, truth = _swing(rate_hz, lost_at, lost=2)
     after = np.flatnonzero(running)
     assert after[0] == lost_at and len(after) >= 8
     reach = np.linalg.norm(course[lost_at] - truth[lost_at, 1])
@@ -550,7 +528,7 @@ def test_an_end_joints_course_keeps_its_distance_to_its_located_parent_known_ans
 
 def test_an_end_joints_course_goes_on_straight_once_its_parent_is_lost():
     rate_hz, lost_at, parent_lost_at = 120.0, 20, 24
-    course, running, truth = _end_lost(rate_hz, lost_at, parent_lost_at)
+    course, running, truth = _swing(rate_hz, lost_at, parent_lost_at, lost=2)
     assert running[parent_lost_at:parent_lost_at + 3].all()
     markers_step = truth[lost_at - 1, 2] - truth[lost_at - 2, 2]
     steps = np.diff(course[parent_lost_at - 1:parent_lost_at + 3], axis=0)
