@@ -458,14 +458,17 @@ SWING_HZ = 1.0  # turns a second
 
 
 def _swing(rate_hz: float, lost_at: int, other_lost_at: int = 10_000, frames: int = 80, stretch: float = 0.0,
-           lost: int = 1):
+           lost: int = 1, root: bool = False):
     """A shoulder, elbow and wrist (a bent arm: bones 0.3 and 0.25 m, 0.6 rad apart) swinging rigidly about the
     shoulder at a turn a second; joint ``lost`` (1 the elbow, 2 the wrist, the limb's end) has its markers lost from
     ``lost_at``, its estimate BIAS off; the other of the two from ``other_lost_at``, its estimate where it is; from
     ``lost_at`` on the wrist goes ``stretch`` metres a frame further out from the shoulder (skin sliding). Returns
-    per frame the blend's course for joint ``lost``, whether one runs, and the truth (frames x 3 joints x 3)."""
-    other = 3 - lost
-    state = blend.BlendState.empty(3, 0.01, HALF_LIFE, True)
+    per frame the blend's course for joint ``lost``, whether one runs, and the truth (frames x 3 joints x 3).
+    ``root``: the chain starts at a still joint before the shoulder (as a limb at its root), and the truth has it
+    first (the indices above one on)."""
+    first = int(root)
+    lost, other = lost + first, 3 - lost + first
+    state = blend.BlendState.empty(3 + first, 0.01, HALF_LIFE, True)
     courses, running, truths = [], [], []
     for f in range(frames):
         state.advance_clock(f / rate_hz)
@@ -473,15 +476,15 @@ def _swing(rate_hz: float, lost_at: int, other_lost_at: int = 10_000, frames: in
         elbow = START + 0.3 * np.array([math.cos(angle), math.sin(angle), 0.0])
         wrist = elbow + 0.25 * np.array([math.cos(angle + 0.6), math.sin(angle + 0.6), 0.0])
         wrist += stretch * max(f - lost_at, 0) * (wrist - START) / np.linalg.norm(wrist - START)
-        truth = np.array([START, elbow, wrist])
+        truth = np.array([START - [0.15, 0.0, 0.0]] * first + [START, elbow, wrist])
         positions = truth.copy()
-        status = np.full(3, LOCATED, np.int64)
+        status = np.full(3 + first, LOCATED, np.int64)
         if f >= lost_at:
             positions[lost] += BIAS
             status[lost] = ESTIMATED
         if f >= other_lost_at:
             status[other] = ESTIMATED
-        state.blend(positions, status, np.arange(3))
+        state.blend(positions, status, np.arange(3 + first))
         courses.append(state.course[lost].copy())
         running.append(state.since_loss[lost] < math.inf)
         truths.append(truth)
@@ -533,6 +536,24 @@ def test_an_end_joints_course_goes_on_straight_once_its_parent_is_lost():
     markers_step = truth[lost_at - 1, 2] - truth[lost_at - 2, 2]
     steps = np.diff(course[parent_lost_at - 1:parent_lost_at + 3], axis=0)
     np.testing.assert_allclose(steps, np.tile(markers_step, (3, 1)), atol=1e-12)
+
+
+def test_a_joint_lost_with_its_child_keeps_its_distance_to_its_located_parent_but_not_to_the_limbs_root():
+    """An elbow lost with its wrist, the shoulder located: the elbow's course keeps its distance to the shoulder, as
+    an end joint's does to its parent. Not where the parent is the limb's root (the hip, the clavicle), which the
+    trunk's skin markers put: a knee lost with its ankle went on straight (on dance2 the hip joint shook the sphere,
+    and the knee's move where its markers went rose from 0.69 to 1.04x its normal step)."""
+    rate_hz, lost_at = 120.0, 20
+    course, running, truth = _swing(rate_hz, lost_at, lost_at, root=True)  # (the shoulder is the chain's second)
+    after = np.flatnonzero(running)
+    assert after[0] == lost_at and len(after) >= 8
+    reach = np.linalg.norm(course[lost_at] - truth[lost_at, 1])
+    for f in after:
+        assert np.linalg.norm(course[f] - truth[f, 1]) == pytest.approx(reach, abs=1e-12)
+    course, running, truth = _swing(rate_hz, lost_at, lost_at)  # (the shoulder is the chain's root)
+    markers_step = truth[lost_at - 1, 1] - truth[lost_at - 2, 1]
+    np.testing.assert_allclose(np.diff(course[lost_at:lost_at + 8], axis=0), np.tile(markers_step, (7, 1)),
+                               atol=1e-12)
 
 
 def test_a_lone_joints_course_goes_on_straight_once_a_neighbour_is_lost():
