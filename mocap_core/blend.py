@@ -429,7 +429,7 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
             if 0 < k < n - 1 and status[idx[k - 1]] == LOCATED and status[idx[k + 1]] == LOCATED:
                 neighbours[0] = positions[idx[k - 1]]
                 neighbours[1] = positions[idx[k + 1]]
-            elif 1 < k and status[idx[k - 1]] == LOCATED:  # its parent alone (not the limb's root: see below)
+            elif 1 < k and status[idx[k - 1]] == LOCATED:  # its parent alone (not the limb's root: _spring_blend)
                 neighbours[0] = positions[idx[k - 1]]
             _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
                           offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on,
