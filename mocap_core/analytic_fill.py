@@ -117,6 +117,15 @@ def nearest_on_circle(point, root, target, upper, lower):
 
 
 @njit(cache=True)
+def nearest_on_sphere(point, centre, radius):
+    """The point at ``radius`` from ``centre`` nearest ``point`` (``point`` itself where it is the centre): the
+    sphere's twin of nearest_on_circle, for a joint with one neighbour."""
+    off = point - centre
+    size = vnorm(off)
+    return centre + off * (radius / size) if size > 1e-9 else point.copy()
+
+
+@njit(cache=True)
 def _frame_along(y, like):
     """A bone frame whose y runs along ``y``, turned from ``like`` by the shortest arc."""
     return mm(rotation_between(like[:, 1].copy(), y), like)

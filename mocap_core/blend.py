@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from mocap_core.analytic_fill import ESTIMATED, HELD, LOCATED, MISSING, all_finite, nearest_on_circle
+from mocap_core.analytic_fill import (ESTIMATED, HELD, LOCATED, MISSING, all_finite, nearest_on_circle,
+                                     nearest_on_sphere)
 from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vnorm
 
 # A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.
@@ -314,7 +315,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
                 rot, shift = line_carry(last_out[k - 1], last_out[k + 1], neighbours[0], neighbours[1])
                 course[k] = mv(rot, course[k] - course_step[k]) + shift
         elif not np.isnan(course_len[k, 0]) and np.isnan(course_len[k, 1]) and all_finite(neighbours[0]):
-            course[k] = on_sphere(course[k], neighbours[0], course_len[k, 0])
+            course[k] = nearest_on_sphere(course[k], neighbours[0], course_len[k, 0])
         else:
             course_len[k] = np.nan
         if held_course[k]:  # (a hold's course: its step dies out, HOLD_COURSE_S)
@@ -339,14 +340,6 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             offset_vel[k] = 0.0
             if since_loss[k] < math.inf:
                 course[k] = p
-
-
-@njit(cache=True)
-def on_sphere(point, centre, radius):
-    """The point at ``radius`` from ``centre`` nearest ``point`` (``point`` itself where it is the centre)."""
-    off = point - centre
-    size = vnorm(off)
-    return centre + off * (radius / size) if size > 1e-9 else point.copy()
 
 
 @njit(cache=True)

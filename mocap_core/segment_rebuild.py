@@ -92,12 +92,12 @@ SEGMENTS = (
 # it 19-45 mm off on average (one styloid hidden from 1 s: the sprint, the Vicon take, karate). Rebuilt from the
 # other styloid and the forearm's other markers (its tracking markers too: FAR_END_OF names the bone whose they
 # are), the sprint's wrist is 4-5 mm off, the Vicon take's right 5-9, the Qualisys walk's 1.5-3.5. Only with at
-# least LONE_STYLOID_PARTNERS of those others seen besides the other styloid: karate's wrist bar has one elbow
+# least LONE_PARTNERS["styloids"] of those others seen besides the other styloid: karate's wrist bar has one elbow
 # marker and one forearm marker, and the bar turns with pronation about the forearm's line, which they do not
 # see (its radial-side marker rebuilt from them came out 46 / 171 mm off, against 34 / 70 for the IK stage). Both
 # lost, the wrist is left to the IK stage (above).
 FAR_END_OF = {"styloids": "forearm"}
-LONE_STYLOID_PARTNERS = 3
+LONE_PARTNERS = {"styloids": 3}  # a pair each rebuilt only while the other is seen: how many more partners it needs
 # The acromion rides the shoulder blade, which slides on the ribs, but far less than a lost one's stand-ins
 # moved: the chest then fell back to other markers (it turned up to 50 degrees in a frame on the Vicon take) and
 # the shoulder joint to the arm's IK. Shoulder hidden from 1 s (studio options): dance1 109 / 262 mm, the Vicon
@@ -201,7 +201,7 @@ def segment_table(tracking_of: Sequence[str] = ()
     which point on the tracking markers hold those distances firmly (0: the bone's own too), whether it
     rolls about its shaft (ROLLS_ABOUT_SHAFT), where in its row its bony pair is (BONY_PAIRS; -1: none), and,
     for a pair each rebuilt only while the other is seen, how many other partners that needs (0: not one;
-    LONE_STYLOID_PARTNERS).
+    LONE_PARTNERS).
     Points are the landmarks, then the tracking markers (``tracking_of``: the segment of each, e.g.
     "L_forearm")."""
     def tracks(name):
@@ -223,10 +223,10 @@ def segment_table(tracking_of: Sequence[str] = ()
             distance_only = tracks(f"{side}_{above}") if above else []
             assert rebuilt[:len(refined)] == refined  # the refined ones lead the rebuilt ones
             rows.append(rigid + distance_only)
-            assert bone not in FAR_END_OF or len(rebuilt) == 2  # (a pair: each rebuilt while the other is seen)
+            assert bone not in LONE_PARTNERS or len(rebuilt) == 2  # (a pair: each rebuilt while the other is seen)
             counts.append((len(rebuilt), len(rigid), len(refined) if distance_only else 0,
                            0 if own_too else len(rigid), bone in ROLLS_ABOUT_SHAFT,
-                           LONE_STYLOID_PARTNERS if bone in FAR_END_OF else 0))
+                           LONE_PARTNERS.get(bone, 0)))
             pair = BONY_PAIRS.get(bone)
             pairs.append([(rebuilt + partners).index(name) for name in pair] if pair else [-1, -1])
     width = max(map(len, rows))
