@@ -21,7 +21,8 @@ BLEND_X = 1.6783469900166612
 # Faster than this, an estimate has jumped to another source (no joint moves so fast: the karate kata's strikes
 # take the wrist to 4-7 m/s); the Vicon take's held left wrist jumped 147 and 286 mm in a frame (18-34 m/s).
 SOURCE_JUMP_M_S = 10.0
-# A source seen again within this many frames (a flickering marker) gets its step from its last sighting.
+# A source seen again within this many frames (a flickering marker) gets its step from its last sighting, and
+# returning markers are met at that step (stop 45).
 FLICKER_FRAMES = 5
 # Seconds between frames when the caller gives no capture times (the blend's spring needs them).
 DEFAULT_FRAME_S = 0.01
@@ -255,6 +256,14 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             offset[k] = last_out[k] + out_step[k] - heading
             since_loss[k] = math.inf
         offset[k] -= raw - heading
+        since = seen_age[k, kind]  # frames since this kind of source was last seen
+        if s == LOCATED and since <= FLICKER_FRAMES:
+            # markers back after a flicker: their step across it is measured, and the output goes on at that, not at
+            # its own step along the course (the Vicon take's left wrist, lost for a frame at 172 where a 41 mm a
+            # frame swing stopped short at 24, went on at 41 and came back 63 mm off its markers; 32 so)
+            across = (raw - seen_raw[k, 0]) / since
+            if vnorm(across) <= SOURCE_JUMP_M_S * dt:
+                offset[k] = last_out[k] + across - raw
         offset_vel[k] = 0.0  # a new offset, eased from rest
         if jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and vnorm(offset[k]) > 0:
             # an estimate that jumps within itself has corrected itself (a rebuild whose partners changed), where a
@@ -262,7 +271,6 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             # cap's pace. Eased from rest, the Vicon take's left elbow went on 103 mm off for 0.1 s after its
             # rebuild had come back to 4 mm in a 4-5 m/s swing (stop 44; 80 mm so)
             offset_vel[k] = offset[k] * (-step / dt / vnorm(offset[k]))
-        since = seen_age[k, kind]  # frames since this kind of source was last seen
         if found_or_lost and since <= FLICKER_FRAMES:
             _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
         elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
@@ -383,7 +391,8 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     course_weight says, which learns from the joint how fast its markers turn and how far its fill missed them
     where they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
     stop 23). Markers that come back while the output is still leaving that course are met from the output as it
-    went (its own last step), not as the fill went. An estimate that leaves its course faster than
+    went (its own last step), not as the fill went; markers back within FLICKER_FRAMES of their last sighting are
+    met at their own step across the gap (stop 45). An estimate that leaves its course faster than
     SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way (an estimate
     that so jumps within itself has corrected itself: with ``step`` set, its offset closes from the first frame at
     that pace, stop 44); one handed between fills (estimated, held) without such a jump has its jump taken into
