@@ -96,6 +96,7 @@ class BlendState:
     prev_vel: np.ndarray      # (n, 3) and its step then
     course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
     held_course: np.ndarray   # (n,) bool: that course began where an estimate was given up for a hold
+    course_base: np.ndarray   # (n, 3) the parent's step that course_step moves with (parent alone located)
     last_frame: np.ndarray    # (n, 3, 3) the last output bone frame (NaN: none)
     turn_axis: np.ndarray     # (n, 3) the frame's offset where its source changed: a turn about this axis
     turn: np.ndarray          # (n, 3) by this angle (radians, column 0) times the spring's share (1), and its
@@ -112,7 +113,7 @@ class BlendState:
                    np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
                    np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan), np.zeros(n, bool),
-                   np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
+                   np.zeros((n, 3)), np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
                    BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
     @property
@@ -137,7 +138,7 @@ class BlendState:
                           self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
                           self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
                           self.frame_s, self.course_on, self.prev_raw, self.prev_vel, self.course_len,
-                          self.held_course)
+                          self.held_course, self.course_base)
 
 
 @njit(cache=True)
@@ -202,7 +203,7 @@ def _take_step(velocity, step, last_step, limit):
 @njit(cache=True)
 def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
                   course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on, prev_raw, prev_vel,
-                  course_len, held_course, neighbours):
+                  course_len, held_course, course_base, neighbours):
     """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
     a loss, eased from the markers' course into that (see blend_transitions). ``neighbours``: the joints
     before and after it in the chain, where both are located, or its parent, where that alone is (else NaN)."""
@@ -296,9 +297,13 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         held_course[k] = gave_up
         course_len[k, 0] = vnorm(p - neighbours[0])  # (NaN unless both are located, or the parent alone)
         course_len[k, 1] = vnorm(neighbours[1] - p)
+        course_base[k] = 0.0  # (the parent's step that course_step carries, where the parent alone is located)
+        if k > 0:
+            course_base[k] = out_step[k - 1]
     elif since_loss[k] < math.inf:
         since_loss[k] += dt
         course[k] += course_step[k]
+        carried = False
         # a lone joint's course keeps its distances to its located neighbours, turning with them (an elbow swings
         # about the shoulder; its markers' straight course flies off the arm). Once one is lost it goes on
         # straight from where it is. Stop 30, short gaps: dance2's elbows 9.5 / 9.6 -> 7.3 / 7.1 mm. Neighbours out
@@ -314,7 +319,10 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # on its markers' straight course, and was still 283 mm off its markers after they came back (151 so). Not
         # where the parent is the limb's root (the hip, the clavicle), which the trunk's skin markers put: the knee's
         # move where its markers went, lost with its ankle on short gaps, went 0.69 -> 1.04x its normal step on
-        # dance2, over the spring alone's 1.01x, as the hip joint shook its sphere.
+        # dance2, over the spring alone's 1.01x, as the hip joint shook its sphere. That course also moves with the
+        # parent: its step is its markers' last step relative to the parent's then, plus the parent's now (stop 45: a
+        # hand or a toe stops with its forearm or foot, where its markers' step ran on; the Vicon take's real gaps,
+        # located joint-frames over 50 / 100 mm off their markers 62 / 7 -> 56 / 3).
         if all_finite(course_len[k]) and all_finite(neighbours):
             if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
                 course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],
@@ -323,11 +331,20 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
                 rot, shift = line_carry(last_out[k - 1], last_out[k + 1], neighbours[0], neighbours[1])
                 course[k] = mv(rot, course[k] - course_step[k]) + shift
         elif not np.isnan(course_len[k, 0]) and np.isnan(course_len[k, 1]) and all_finite(neighbours[0]):
+            change = neighbours[0] - last_out[k - 1] - course_base[k]  # (the parent's step, less the one carried)
+            course[k] += change
+            course_step[k] += change
+            course_base[k] += change
+            carried = True
             course[k] = nearest_on_sphere(course[k], neighbours[0], course_len[k, 0])
         else:
             course_len[k] = np.nan
-        if held_course[k]:  # (a hold's course: its step dies out, HOLD_COURSE_S)
-            course_step[k] *= math.exp(-dt / HOLD_COURSE_S)
+        if held_course[k]:  # (a hold's course: its step dies out, HOLD_COURSE_S; relative to a parent that carries it)
+            fade = math.exp(-dt / HOLD_COURSE_S)
+            if carried:
+                course_step[k] = course_base[k] + (course_step[k] - course_base[k]) * fade
+            else:
+                course_step[k] *= fade
         w = course_weight(since_loss[k], trust[k])
         w = 1.0 if w >= EASED else w
         apart = vnorm(p - course[k])
@@ -376,7 +393,7 @@ def _linear_return(p, s, was, last, offset, step):
 @njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
                       has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
-                      course_on, prev_raw, prev_vel, course_len, held_course):
+                      course_on, prev_raw, prev_vel, course_len, held_course, course_base):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -400,14 +417,16 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     loss does, its step dying out (HOLD_COURSE_S, since stop 44), and one back from a hold ends a course as
     returning markers do (stop 29). The course of a lone joint between two located ones keeps its distances to
     them, on their circle (stop 30); out of their reach, it moves with their line (stop 39). One whose parent
-    alone is located keeps its distance to it, unless that is the limb's root (stop 44). While a fill stands in,
+    alone is located keeps its distance to it, unless that is the limb's root (stop 44), and moves with it: its step
+    is its markers' last step relative to the parent's then, plus the parent's now (stop 45). While a fill stands in,
     the output stays within MAX_APART_M of it (stop 31). A flickering marker swings the offset back and forth by
     the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
     markers' course after a loss and how far the output has left it; ``course_len``, a lone joint's distances to
-    its neighbours where the course began; ``held_course``, whether it began at a hold."""
+    its neighbours where the course began; ``held_course``, whether it began at a hold; ``course_base``, the
+    parent's step that the course's step carries."""
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
     neighbours = np.empty((2, 3))
@@ -435,7 +454,7 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
                 neighbours[0] = positions[idx[k - 1]]
             _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
                           offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on,
-                          prev_raw, prev_vel, course_len, held_course, neighbours)
+                          prev_raw, prev_vel, course_len, held_course, course_base, neighbours)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):
