@@ -322,7 +322,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # dance2, over the spring alone's 1.01x, as the hip joint shook its sphere. That course also moves with the
         # parent: its step is its markers' last step relative to the parent's then, plus the parent's now (stop 45: a
         # hand or a toe stops with its forearm or foot, where its markers' step ran on; the Vicon take's real gaps,
-        # located joint-frames over 50 / 100 mm off their markers 62 / 7 -> 56 / 3).
+        # located joint-frames over 50 / 100 mm off their markers 62 / 7 -> 57 / 3).
         if all_finite(course_len[k]) and all_finite(neighbours):
             if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
                 course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],

@@ -115,7 +115,7 @@ def test_markers_back_after_a_flicker_are_met_at_their_own_step_across_it_known_
     error = np.linalg.norm(out - truth, axis=1)
     assert error[back] == pytest.approx(error[back - 1], abs=1e-12)  # (no further off than where they came back)
     assert error[back:].max() == pytest.approx(error[back], abs=1e-12)
-    # going on at the output's own step (as after a longer gap) would have put it a whole stop short further off
+    # going on at the output's own step (as after a longer gap) would have put it over 20 mm further off
     own_step = out[back - 1] + (out[back - 1] - out[back - 2]) - truth[back]
     assert np.linalg.norm(own_step) > error[back] + 0.02
     assert error[-1] < 1e-3
@@ -567,10 +567,10 @@ def test_an_end_joints_course_goes_on_straight_once_its_parent_is_lost():
 
 def test_an_end_joints_course_moves_with_its_located_parent_known_answer():
     """A wrist lost while the whole arm moves along at 40 mm a frame, which then stops short (the Vicon take's left
-    hand at frame 309: lost while it moved 59 mm a frame, as its forearm slowed from 30 to 20): its course carries
-    its markers' last step less the elbow's then, plus the elbow's step now, so it stops with the arm, where the
-    markers' last step ran on. Stop 45: the Vicon take's real gaps, located joint-frames over 50 / 100 mm off their
-    markers 62 / 7 -> 56 / 3."""
+    wrist, held at frames 335-363 while its elbow slowed from 26 to 5 mm a frame, ran on and came back 116 mm off its
+    markers): its course carries its markers' last step less the elbow's then, plus the elbow's step now, so it stops
+    with the arm, where the markers' last step ran on. Stop 45: the Vicon take's real gaps, located joint-frames over
+    50 / 100 mm off their markers 62 / 7 -> 57 / 3."""
     rate_hz, lost_at, stop_at = 120.0, 20, 24
     arm = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.5, 0.15, 0.0]])  # shoulder, elbow, wrist
     along = np.array([0.0, 0.04, 0.0])  # metres a frame
