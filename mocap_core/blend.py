@@ -322,7 +322,9 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # dance2, over the spring alone's 1.01x, as the hip joint shook its sphere. That course also moves with the
         # parent: its step is its markers' last step relative to the parent's then, plus the parent's now (stop 45: a
         # hand or a toe stops with its forearm or foot, where its markers' step ran on; the Vicon take's real gaps,
-        # located joint-frames over 50 / 100 mm off their markers 62 / 7 -> 57 / 3).
+        # located joint-frames over 50 / 100 mm off their markers 62 / 7 -> 57 / 3). A course begun with the parent lost
+        # too is carried once the parent is located again, at its distance then (the left hand, lost with its wrist
+        # for a frame at 172 and a frame longer itself: 57 -> 53).
         if all_finite(course_len[k]) and all_finite(neighbours):
             if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
                 course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],
@@ -330,12 +332,14 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             elif all_finite(last_out[k - 1]) and all_finite(last_out[k + 1]):
                 rot, shift = line_carry(last_out[k - 1], last_out[k + 1], neighbours[0], neighbours[1])
                 course[k] = mv(rot, course[k] - course_step[k]) + shift
-        elif not np.isnan(course_len[k, 0]) and np.isnan(course_len[k, 1]) and all_finite(neighbours[0]):
+        elif np.isnan(course_len[k, 1]) and all_finite(neighbours[0]) and all_finite(last_out[k - 1]):
             change = neighbours[0] - last_out[k - 1] - course_base[k]  # (the parent's step, less the one carried)
             course[k] += change
             course_step[k] += change
             course_base[k] += change
             carried = True
+            if np.isnan(course_len[k, 0]):  # (the parent located again: from here on)
+                course_len[k, 0] = vnorm(course[k] - neighbours[0])
             course[k] = nearest_on_sphere(course[k], neighbours[0], course_len[k, 0])
         else:
             course_len[k] = np.nan
