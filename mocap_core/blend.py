@@ -324,7 +324,8 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # hand or a toe stops with its forearm or foot, where its markers' step ran on; the Vicon take's real gaps,
         # located joint-frames over 50 / 100 mm off their markers 62 / 7 -> 57 / 3). A course begun with the parent lost
         # too is carried once the parent is located again, at its distance then (the left hand, lost with its wrist
-        # for a frame at 172 and a frame longer itself: 57 -> 53).
+        # for a frame at 172 and a frame longer itself: 57 -> 53); never the root's child (k 1), whose neighbours are
+        # both given where both are located.
         if all_finite(course_len[k]) and all_finite(neighbours):
             if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
                 course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],
@@ -332,7 +333,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             elif all_finite(last_out[k - 1]) and all_finite(last_out[k + 1]):
                 rot, shift = line_carry(last_out[k - 1], last_out[k + 1], neighbours[0], neighbours[1])
                 course[k] = mv(rot, course[k] - course_step[k]) + shift
-        elif np.isnan(course_len[k, 1]) and all_finite(neighbours[0]) and all_finite(last_out[k - 1]):
+        elif k > 1 and np.isnan(course_len[k, 1]) and all_finite(neighbours[0]) and all_finite(last_out[k - 1]):
             change = neighbours[0] - last_out[k - 1] - course_base[k]  # (the parent's step, less the one carried)
             course[k] += change
             course_step[k] += change

@@ -481,12 +481,13 @@ SWING_HZ = 1.0  # turns a second
 
 
 def _swing(rate_hz: float, lost_at: int, other_lost_at: int = 10_000, frames: int = 80, stretch: float = 0.0,
-           lost: int = 1, root: bool = False):
+           lost: int = 1, root: bool = False, other_back_at: int = 10_000):
     """A shoulder, elbow and wrist (a bent arm: bones 0.3 and 0.25 m, 0.6 rad apart) swinging rigidly about the
     shoulder at a turn a second; joint ``lost`` (1 the elbow, 2 the wrist, the limb's end) has its markers lost from
-    ``lost_at``, its estimate BIAS off; the other of the two from ``other_lost_at``, its estimate where it is; from
-    ``lost_at`` on the wrist goes ``stretch`` metres a frame further out from the shoulder (skin sliding). Returns
-    per frame the blend's course for joint ``lost``, whether one runs, and the truth (frames x 3 joints x 3).
+    ``lost_at``, its estimate BIAS off; the other of the two from ``other_lost_at`` (to ``other_back_at``), its
+    estimate where it is; from ``lost_at`` on the wrist goes ``stretch`` metres a frame further out from the shoulder
+    (skin sliding). Returns per frame the blend's course for joint ``lost``, whether one runs, and the truth (frames
+    x 3 joints x 3).
     ``root``: the chain starts at a still joint before the shoulder (as a limb at its root), and the truth has it
     first (the indices above one on)."""
     first = int(root)
@@ -505,7 +506,7 @@ def _swing(rate_hz: float, lost_at: int, other_lost_at: int = 10_000, frames: in
         if f >= lost_at:
             positions[lost] += BIAS
             status[lost] = ESTIMATED
-        if f >= other_lost_at:
+        if other_lost_at <= f < other_back_at:
             status[other] = ESTIMATED
         state.blend(positions, status, np.arange(3 + first))
         courses.append(state.course[lost].copy())
@@ -607,10 +608,11 @@ def test_a_joint_lost_with_its_child_keeps_its_distance_to_its_located_parent_bu
     reach = np.linalg.norm(course[lost_at] - truth[lost_at, 1])
     for f in after:
         assert np.linalg.norm(course[f] - truth[f, 1]) == pytest.approx(reach, abs=1e-12)
-    course, running, truth = _swing(rate_hz, lost_at, lost_at)  # (the shoulder is the chain's root)
-    markers_step = truth[lost_at - 1, 1] - truth[lost_at - 2, 1]
-    np.testing.assert_allclose(np.diff(course[lost_at:lost_at + 8], axis=0), np.tile(markers_step, (7, 1)),
-                               atol=1e-12)
+    for wrist_back_at in (10_000, lost_at + 3):  # (the wrist seen again mid-course: the shoulder is still the root)
+        course, running, truth = _swing(rate_hz, lost_at, lost_at, other_back_at=wrist_back_at)
+        markers_step = truth[lost_at - 1, 1] - truth[lost_at - 2, 1]
+        np.testing.assert_allclose(np.diff(course[lost_at:lost_at + 8], axis=0), np.tile(markers_step, (7, 1)),
+                                   atol=1e-12)
 
 
 def test_a_lone_joints_course_goes_on_straight_once_a_neighbour_is_lost():
