@@ -258,13 +258,12 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             since_loss[k] = math.inf
         offset[k] -= raw - heading
         since = seen_age[k, kind]  # frames since this kind of source was last seen
-        if s == LOCATED and since <= FLICKER_FRAMES:
+        across = (raw - seen_raw[k, kind]) / since  # and its step since then
+        if s == LOCATED and since <= FLICKER_FRAMES and vnorm(across) <= SOURCE_JUMP_M_S * dt:
             # markers back after a flicker: their step across it is measured, and the output goes on at that, not at
             # its own step along the course (the Vicon take's left wrist, lost for a frame at 172 where a 41 mm a
             # frame swing stopped short at 24, went on at 41 and came back 63 mm off its markers; 32 so)
-            across = (raw - seen_raw[k, 0]) / since
-            if vnorm(across) <= SOURCE_JUMP_M_S * dt:
-                offset[k] = last_out[k] + across - raw
+            offset[k] = last_out[k] + across - raw
         offset_vel[k] = 0.0  # a new offset, eased from rest
         if jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and vnorm(offset[k]) > 0:
             # an estimate that jumps within itself has corrected itself (a rebuild whose partners changed), where a
@@ -273,7 +272,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             # rebuild had come back to 4 mm in a 4-5 m/s swing (stop 44; 80 mm so)
             offset_vel[k] = offset[k] * (-step / dt / vnorm(offset[k]))
         if found_or_lost and since <= FLICKER_FRAMES:
-            _take_step(raw_vel[k], (raw - seen_raw[k, kind]) / since, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
+            _take_step(raw_vel[k], across, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
         elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
             raw_vel[k] = 0.0  # each taken into the offset (stop 28: the Vicon take's kicking knee, 0.46 m in 5 frames)
     else:
