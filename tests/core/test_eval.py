@@ -57,6 +57,11 @@ def test_eval_gaps_with_short_gaps(tmp_path):
                and line.count("|") == 12)
     cells = [float(c) for c in row.split("|")[5:-1]]
     assert all(np.isfinite(cells)) and cells[0] > 0      # normal step, then loss and return moves
+    moves = list(csv.DictReader(open(tmp_path / "transitions.csv")))   # the same rows, for `mocap eval targets`
+    assert [(x["mode"], x["solver"], x["constraints"], x["joint"]) for x in moves] == [("markers", "ccd", "on",
+                                                                                       "elbow_l")]
+    assert float(moves[0]["normal_step_m"]) * 1000 == pytest.approx(cells[0], abs=0.05)
+    assert float(moves[0]["return_added_ratio"]) == pytest.approx(cells[-1], abs=0.005)
     bad = mocap("eval", "gaps", "--take", str(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d")), "--profile",
                 "qualisys_sports", "--gap-length", "0.3", "--gap-every", "0.2", "--report", str(tmp_path))
     assert bad.returncode != 0 and "no more than the spacing" in bad.stderr
