@@ -68,3 +68,28 @@ def move_ratio_plot(ratios: dict[str, np.ndarray], path: Path, title: str) -> No
     fig.savefig(path)
     plt.close(fig)
 
+
+def targets_plot(checks, path: Path) -> None:
+    """Each case's figure as a share of its target's limit (`mocap eval targets`): a bar a case under its target's
+    name, the limit at 1."""
+    rows = []  # (label, check or None for a target's name), top to bottom
+    for i, c in enumerate(checks):
+        if i == 0 or checks[i - 1].target != c.target:
+            rows.append((c.target, None))
+        rows.append((c.case, c))
+    y = np.arange(len(rows))[::-1]
+    fig, ax = plt.subplots(figsize=(8, 0.16 * len(rows) + 1.0), dpi=110)
+    for yi, (label, c) in zip(y, rows):
+        if c is None:
+            ax.text(0.0, yi, label, fontsize=7, weight="bold", va="center", transform=ax.get_yaxis_transform())
+        else:
+            ax.barh(yi, np.nan_to_num(c.of_limit), color="tab:green" if c.met else "tab:red", height=0.7)
+    ax.axvline(1.0, color="black", lw=1)
+    ax.set_yticks([yi for yi, (_, c) in zip(y, rows) if c is not None],
+                  [label for label, c in rows if c is not None], fontsize=6)
+    ax.set_xlabel("figure / limit (met at 1 or under)")
+    ax.set_title(f"issue 9's targets: {sum(c.met for c in checks)} of {len(checks)} cases met", fontsize=9)
+    ax.set_ylim(-0.6, len(rows) - 0.4)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -51,6 +51,9 @@ def test_every_case_met_when_every_figure_is_within_its_limit(tmp_path):
     checks = T.check(_results(tmp_path))
     n = len(T.ELBOW_CASES) + len(T.KNEE_ANKLE_CASES) + 2 + len(T.REACQUIRE_REPORTS) + 1 + 1
     assert len(checks) == n and all(c.met for c in checks)
+    share = {c.target.split(":")[0]: c.of_limit for c in checks}   # the figure furthest over its limit, shared
+    assert share["elbow"] == pytest.approx(0.05 / 0.06) and share["knee and ankle"] == pytest.approx(0.02 / 0.03)
+    assert share["full-body frame"] == pytest.approx(0.2 / 0.3) and share["re-acquisition"] == pytest.approx(1.1 / 1.5)
     assert f"{n} of {n} cases met" in T.render(checks)
 
 
@@ -101,7 +104,9 @@ def test_the_committed_reports_have_every_case(tmp_path):
         assert sum(c.startswith(report + " ") for c in cases) == hidden, report
     assert sum(x["target"].startswith("full-body frame") for x in rows) == 4   # every solver timed
     assert {x["met"] for x in rows} <= {"True", "False"}
+    assert all((float(x["of_limit"]) <= 1) == (x["met"] == "True") for x in rows)
     assert (tmp_path / "targets.md").read_text() == r.stdout
+    assert (tmp_path / "targets.png").stat().st_size > 20_000
 
 
 def test_the_committed_table_and_the_readme_agree_with_the_reports():
