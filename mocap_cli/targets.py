@@ -12,6 +12,8 @@ from pathlib import Path
 DANCE_TAKES = ("dance1", "dance2", "walk1", "walk2")
 SIDES = ("l", "r")
 SIDE_NAME = {"l": "left", "r": "right"}
+# The reports' rows of the studio graphs' settings: markers removed, CCD, constraints on.
+STUDIO = ("markers", "ccd", "on")
 
 # Elbow hidden from 1 s to the end of the take (the Qualisys walk's from 0.3 s, karate's to 20 s), studio options.
 ELBOW_CASES = (
@@ -57,9 +59,6 @@ REACQUIRE = f"re-acquisition: no move over {REACQUIRE_RATIO:g}x the normal step"
 TIMING_REPORT, TIMING_MEAN_MS, TIMING_MAX_MS = "timing_beyond", 0.3, 1.0
 TIMING = f"full-body frame: mean <= {TIMING_MEAN_MS:g} ms, max <= {TIMING_MAX_MS:g} ms"
 
-# The make target that writes each kind of report (any other: make results-beyond), for the error message when one
-# is missing.
-WRITTEN_BY = {"short_": "make results-short", "real_gaps": "make results-short", "elbow_sprint": "make results"}
 
 
 class TargetsError(Exception):
@@ -78,20 +77,25 @@ class Check:
         return self.of_limit <= 1.0
 
 
+def _made_by(report: str) -> str:
+    """The make target that writes a report, for the error message when it is missing."""
+    if report == SOLVERS_REPORT:
+        return "make results"
+    return "make results-short" if report.startswith("short_") or report == REAL_GAPS_REPORT else "make results-beyond"
+
+
 def _read(results: Path, report: str, name: str) -> list[dict]:
     path = results / report / name
     if not path.is_file():
-        maker = next((m for prefix, m in WRITTEN_BY.items() if report.startswith(prefix)), "make results-beyond")
-        raise TargetsError(f"{path} is missing: `{maker}` writes it (a report made before transitions.csv existed "
-                           f"needs making again)")
+        why = " (reports made before stop 46 have no transitions.csv)" if name == "transitions.csv" else ""
+        raise TargetsError(f"{path} is missing: `{_made_by(report)}` writes it{why}")
     with open(path, newline="") as f:
         return list(csv.DictReader(f))
 
 
 def _studio_row(rows: list[dict], joint: str, report: str) -> dict:
-    """The row of the studio graphs' settings: markers removed, CCD, constraints on."""
     for r in rows:
-        if (r["mode"], r["solver"], r["constraints"], r["joint"]) == ("markers", "ccd", "on", joint):
+        if (r["mode"], r["solver"], r["constraints"], r["joint"]) == (*STUDIO, joint):
             return r
     raise TargetsError(f"{report}: no row for {joint} with the markers removed, CCD, constraints on")
 
@@ -121,9 +125,11 @@ def check(results: Path) -> list[Check]:
                          f"{ratio:.2f}x ({_mm(min(means.values()))}-{_mm(max(means.values()))} mm)",
                          ratio / SOLVERS_RATIO))
     for report in REACQUIRE_REPORTS:
-        for r in _read(results, report, "transitions.csv"):
-            if (r["mode"], r["solver"], r["constraints"]) != ("markers", "ccd", "on"):
-                continue
+        rows = [r for r in _read(results, report, "transitions.csv")
+                if (r["mode"], r["solver"], r["constraints"]) == STUDIO]
+        if not rows:
+            raise TargetsError(f"{report}: no row with the markers removed, CCD, constraints on")
+        for r in rows:
             loss, back = float(r["loss_added_ratio"]), float(r["return_added_ratio"])
             worst = max((x for x in (loss, back) if math.isfinite(x)), default=float("nan"))
             out.append(Check(REACQUIRE, f"{report} {r['joint']}",

@@ -78,9 +78,18 @@ def test_a_missing_report_names_the_make_target_that_writes_it(tmp_path):
     with pytest.raises(T.TargetsError, match="short_elbow_dance1_l_blend/transitions.csv is missing: "
                                              "`make results-short`"):
         T.check(root)
-    (root / "elbow_karate_rebuild_r" / "gaps.csv").unlink()
-    with pytest.raises(T.TargetsError, match="elbow_karate_rebuild_r/gaps.csv is missing: `make results-beyond`"):
+    (root / "short_elbow_dance1_l_blend" / "transitions.csv").write_text("mode,solver,constraints,joint\n")
+    with pytest.raises(T.TargetsError, match="short_elbow_dance1_l_blend: no row with the markers removed"):
         T.check(root)
+    _results(root)
+    for report, maker in (("elbow_sprint_rebuild", "results-beyond"), ("elbow_sprint", "results"),
+                          ("real_gaps_vicon", "results-short")):
+        name = "real_gaps.csv" if report.startswith("real") else "gaps.csv"
+        saved = (root / report / name).read_text()
+        (root / report / name).unlink()
+        with pytest.raises(T.TargetsError, match=f"{report}/{name} is missing: `make {maker}` writes it$"):
+            T.check(root)
+        (root / report / name).write_text(saved)
 
 
 def test_a_report_without_the_studio_row_is_an_error(tmp_path):
