@@ -429,14 +429,13 @@ def run_latency(args) -> int:
 
 
 def run_targets(args) -> int:
-    from mocap_cli.targets import TargetsError, check, render, write
+    from mocap_cli.targets import TargetsError, check, write
 
     try:
         checks = check(Path(args.results))
     except TargetsError as e:
         log.error("%s", e)
         return 1
-    write(checks, Path(args.report), plot=not args.no_plots)
-    print(render(checks), end="")
+    print(write(checks, Path(args.report), plot=not args.no_plots), end="")
     log.info("wrote %s", args.report)
     return 0

@@ -60,7 +60,6 @@ TIMING_REPORT, TIMING_MEAN_MS, TIMING_MAX_MS = "timing_beyond", 0.3, 1.0
 TIMING = f"full-body frame: mean <= {TIMING_MEAN_MS:g} ms, max <= {TIMING_MAX_MS:g} ms"
 
 
-
 class TargetsError(Exception):
     pass
 
@@ -93,11 +92,14 @@ def _read(results: Path, report: str, name: str) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def _studio_row(rows: list[dict], joint: str, report: str) -> dict:
-    for r in rows:
-        if (r["mode"], r["solver"], r["constraints"], r["joint"]) == (*STUDIO, joint):
-            return r
-    raise TargetsError(f"{report}: no row for {joint} with the markers removed, CCD, constraints on")
+def _studio_rows(rows: list[dict], report: str, joint: str | None = None) -> list[dict]:
+    """The report's rows of the studio graphs' settings (of ``joint`` alone, if given); an error if there are none."""
+    found = [r for r in rows if (r["mode"], r["solver"], r["constraints"]) == STUDIO
+             and joint in (None, r["joint"])]
+    if not found:
+        raise TargetsError(f"{report}: no row{f' for {joint}' if joint else ''} with the markers removed, CCD, "
+                           "constraints on")
+    return found
 
 
 def _mm(x: float) -> str:
@@ -107,12 +109,12 @@ def _mm(x: float) -> str:
 def check(results: Path) -> list[Check]:
     out = []
     for case, report, joint in ELBOW_CASES:
-        r = _studio_row(_read(results, report, "gaps.csv"), joint, report)
+        r = _studio_rows(_read(results, report, "gaps.csv"), report, joint)[0]
         mean, top = float(r["mean"]), float(r["max"])
         out.append(Check(ELBOW, case, f"{_mm(mean)} / {_mm(top)} mm", max(mean / ELBOW_MEAN_M, top / ELBOW_MAX_M)))
     for case, report, side in KNEE_ANKLE_CASES:
         rows = _read(results, report, "gaps.csv")
-        knee, ankle = (float(_studio_row(rows, f"{j}_{side}", report)["mean"]) for j in ("knee", "ankle"))
+        knee, ankle = (float(_studio_rows(rows, report, f"{j}_{side}")[0]["mean"]) for j in ("knee", "ankle"))
         out.append(Check(KNEE_ANKLE, case, f"{_mm(knee)} / {_mm(ankle)} mm", max(knee, ankle) / KNEE_ANKLE_MEAN_M))
     rows = [r for r in _read(results, SOLVERS_REPORT, "gaps.csv") if r["mode"] == "markers"
             and r["joint"] == SOLVERS_JOINT]
@@ -125,11 +127,7 @@ def check(results: Path) -> list[Check]:
                          f"{ratio:.2f}x ({_mm(min(means.values()))}-{_mm(max(means.values()))} mm)",
                          ratio / SOLVERS_RATIO))
     for report in REACQUIRE_REPORTS:
-        rows = [r for r in _read(results, report, "transitions.csv")
-                if (r["mode"], r["solver"], r["constraints"]) == STUDIO]
-        if not rows:
-            raise TargetsError(f"{report}: no row with the markers removed, CCD, constraints on")
-        for r in rows:
+        for r in _studio_rows(_read(results, report, "transitions.csv"), report):
             loss, back = float(r["loss_added_ratio"]), float(r["return_added_ratio"])
             worst = max((x for x in (loss, back) if math.isfinite(x)), default=float("nan"))
             out.append(Check(REACQUIRE, f"{report} {r['joint']}",
@@ -159,9 +157,11 @@ def render(checks: list[Check]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write(checks: list[Check], out: Path, plot: bool = True) -> None:
+def write(checks: list[Check], out: Path, plot: bool = True) -> str:
+    """targets.md (returned too), targets.csv and, with ``plot``, targets.png in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "targets.md").write_text(render(checks))
+    md = render(checks)
+    (out / "targets.md").write_text(md)
     with open(out / "targets.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["target", "case", "figure", "of_limit", "met"])
         w.writeheader()
@@ -170,3 +170,4 @@ def write(checks: list[Check], out: Path, plot: bool = True) -> None:
         from mocap_cli.plots import targets_plot
 
         targets_plot(checks, out / "targets.png")
+    return md
