@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden results results-blend results-beyond results-short targets
+.PHONY: demo test setup bench clean golden results results-blend results-beyond results-short targets checks
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -139,6 +139,18 @@ results-beyond: $(STAMP)
 # (runs nothing itself).
 targets: $(STAMP)
 	$(BIN)/mocap eval targets --report docs/results/targets
+
+# What each recording's markers do wrong (gaps, markers of one bone off their spacing), before anything is solved.
+checks: $(STAMP)
+	$(BIN)/mocap check ../shared/data/02_qualisys_walking_ezc3d_Qualisys.c3d --profile qualisys_sports \
+		--report docs/results/take_check/qualisys_walk
+	$(BIN)/mocap check ../shared/data/03_sprint_start_BTK_SprintMotion.trc --profile btk_sprint \
+		--report docs/results/take_check/sprint
+	$(BIN)/mocap check ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 --report docs/results/take_check/karate
+	$(BIN)/mocap check ../shared/data/12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d --profile vicon53 \
+		--report docs/results/take_check/vicon
+	for take in dance1 dance2 walk1 walk2; do \
+		$(BIN)/mocap check $(DANCE):$$take --profile dance28 --report docs/results/take_check/$$take || exit 1; done
 
 # Short gaps, as a studio's occlusions are (91 % of the Vicon take's real gaps last 0.1 s or less): the joints
 # hidden 0.1 s in every 0.5 s, each case three ways: the thesis's method, the studio graphs' options without the

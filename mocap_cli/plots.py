@@ -93,3 +93,30 @@ def targets_plot(checks, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def spacing_plot(rec, faults, path: Path, title: str, most: int = 8) -> None:
+    """Each faulty pair's distance over time (`mocap check`): its usual spacing dashed, the stretches off shaded; the
+    ``most`` pairs with the most frames off."""
+    frames_off = {}
+    for f in faults:
+        frames_off[f.pair] = frames_off.get(f.pair, 0) + f.frames
+    pairs = sorted(frames_off, key=lambda p: -frames_off[p])[:most]
+    times = rec.times()
+    fig, axes = plt.subplots(len(pairs), 1, figsize=(9, 1.5 * len(pairs) + 0.8), dpi=100, sharex=True, squeeze=False)
+    for ax, pair in zip(axes[:, 0], pairs):
+        d = np.linalg.norm(rec.positions[:, pair.ia] - rec.positions[:, pair.ib], axis=1) * 1000
+        ax.plot(times, d, lw=0.8, color="tab:blue")
+        stretches = [f for f in faults if f.pair == pair]
+        ax.axhline(stretches[0].usual_m * 1000, color="black", lw=0.8, ls="--")
+        for f in stretches:
+            ax.axvspan(f.start_s, f.end_s + 1 / rec.rate_hz, color="tab:red", alpha=0.25, lw=0)
+        ax.set_ylabel("mm", fontsize=7)
+        ax.set_title(f"{pair.bone}: {pair.a} to {pair.b}", fontsize=8, loc="left")
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

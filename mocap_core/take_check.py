@@ -1,0 +1,141 @@
+"""What a take's markers do wrong, before anything is solved: how long each one is lost, and where the markers of
+one bone stop keeping their spacing (a label swapped, a ghost, a marker that slid or stands still).
+
+Markers on one rigid bone keep their distances to within skin motion (a few per cent). Where a pair's distance is off
+its usual one (the take's median) by more than ``TOLERANCE`` of it, and by ``FLOOR_M`` at least, one of the two is
+not where its label says: the gap fills, which trust what is seen, cannot do better than that marker there. Which
+markers share a bone comes from the segment rebuild's table (segment_rebuild.SEGMENTS, the profile's tracking markers
+of that bone) and the pelvis's three landmarks.
+
+Found on the recordings in ../shared/data (`mocap check`; docs/gap_filling.md traces each):
+dance1's left toe markers 5.9-13.3 s, walk1's right toe markers standing still at 2.5-3.2 s, walk2's left wrist
+markers 4.2-4.8 s, the Vicon take's left inner wrist marker 0-1.6 s (slid up the forearm); the Qualisys walk has
+none. The thresholds, and what others give, are in docs/gap_filling.md ("Stop 47: the recordings checked").
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocap_core.profiles import Profile, parse_expression, strip_prefix
+from mocap_core.segment_rebuild import SEGMENTS
+
+TOLERANCE = 0.25  # a pair is off where its distance is off the usual one by more than this part of it,
+FLOOR_M = 0.015   # and by this much at least (skin moves 5-10 mm on a 50 mm toe pair; the Vicon take's inner
+#                   wrist marker slid 16 mm off its 45 mm spacing to the outer one)
+MERGE_S = 0.1     # stretches off closer than this are one
+TRUNK = ("TV2", "TV12", "SME")
+PELVIS = ("pelvis", ("SACR", "L_IAS", "R_IAS"))
+
+
+@dataclass(frozen=True)
+class Pair:
+    bone: str  # "L_foot", "pelvis", ...
+    a: str     # marker labels, as the recording has them
+    b: str
+    ia: int    # their columns in the recording
+    ib: int
+
+
+@dataclass(frozen=True)
+class Stretch:
+    """Where a pair is off its usual spacing."""
+
+    pair: Pair
+    usual_m: float
+    start_s: float
+    end_s: float
+    frames: int     # frames off within it
+    low_m: float    # the spacing's range within it
+    high_m: float
+
+
+@dataclass(frozen=True)
+class MarkerGaps:
+    label: str
+    lost: int        # frames
+    gaps: int        # how many stretches
+    longest_s: float
+
+
+def bone_markers(profile: Profile, labels: list[str]) -> dict[str, list[str]]:
+    """Each bone's markers the recording has (two at least), as labelled there: its landmarks' markers and the
+    profile's tracking markers of it."""
+    column = _columns(profile, labels)
+    groups = [(f"{side}_{bone}", [_sided(name, side) for name in names + partners if not name.startswith("other")])
+              for side in "LR" for bone, names, partners in SEGMENTS]
+    groups.append(PELVIS)
+    out = {}
+    for bone, landmarks in groups:
+        markers = [m for lm in landmarks if lm in profile.landmarks
+                   for m in parse_expression(profile.landmarks[lm], profile.where(lm))]
+        markers += profile.tracking.get(bone, [])
+        markers = [m for m in dict.fromkeys(markers) if m in column]
+        if len(markers) >= 2:
+            out[bone] = markers
+    return out
+
+
+def rigid_pairs(profile: Profile, labels: list[str]) -> list[Pair]:
+    """Every pair of markers on one bone, each pair once (the first bone that has it)."""
+    column = _columns(profile, labels)
+    pairs, seen = [], set()
+    for bone, markers in bone_markers(profile, labels).items():
+        for i, a in enumerate(markers):
+            for b in markers[i + 1:]:
+                if frozenset((a, b)) not in seen:
+                    seen.add(frozenset((a, b)))
+                    pairs.append(Pair(bone, a, b, column[a], column[b]))
+    return pairs
+
+
+def spacing_faults(positions: np.ndarray, pairs: list[Pair], rate_hz: float) -> list[Stretch]:
+    """The stretches where each pair is off its usual spacing, in time order per pair."""
+    out = []
+    for pair in pairs:
+        d = np.linalg.norm(positions[:, pair.ia] - positions[:, pair.ib], axis=1)
+        seen = np.isfinite(d)
+        if not seen.any():
+            continue
+        usual = float(np.median(d[seen]))
+        off = np.flatnonzero(seen & (np.abs(d - usual) > max(TOLERANCE * usual, FLOOR_M)))
+        for run in _runs(off, max(1, round(MERGE_S * rate_hz))):
+            within = d[run[0]:run[-1] + 1]
+            out.append(Stretch(pair, usual, run[0] / rate_hz, run[-1] / rate_hz, len(run),
+                               float(np.nanmin(within)), float(np.nanmax(within))))
+    return out
+
+
+def marker_gaps(positions: np.ndarray, markers: dict[str, int], rate_hz: float) -> list[MarkerGaps]:
+    """How long each marker (label -> column) is lost, the longest gap first."""
+    out = []
+    for label, c in markers.items():
+        lost = np.flatnonzero(~np.isfinite(positions[:, c]).all(axis=1))
+        runs = _runs(lost, 1)
+        out.append(MarkerGaps(label, len(lost), len(runs), max((len(r) for r in runs), default=0) / rate_hz))
+    return sorted(out, key=lambda g: (-g.longest_s, -g.lost, g.label))
+
+
+def used_markers(profile: Profile, labels: list[str]) -> dict[str, int]:
+    """The markers the profile uses (its landmarks' and tracking markers) that the recording has: label -> column."""
+    column = _columns(profile, labels)
+    names = [m for lm, expr in profile.landmarks.items() for m in parse_expression(expr, profile.where(lm))]
+    names += [m for markers in profile.tracking.values() for m in markers]
+    return {m: column[m] for m in dict.fromkeys(names) if m in column}
+
+
+def _columns(profile: Profile, labels: list[str]) -> dict[str, int]:
+    clean = [strip_prefix(x) if profile.strip_prefixes else x for x in labels]
+    return {label: i for i, label in enumerate(clean)}
+
+
+def _sided(name: str, side: str) -> str:
+    return name if name in TRUNK else f"{side}_{name}"
+
+
+def _runs(frames: np.ndarray, join: int) -> list[np.ndarray]:
+    """Sorted frame numbers in runs: a frame more than ``join`` after the one before begins a new run."""
+    if len(frames) == 0:
+        return []
+    return np.split(frames, np.flatnonzero(np.diff(frames) > join) + 1)
