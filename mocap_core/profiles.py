@@ -76,9 +76,13 @@ class Profile(BaseModel):
         line = self.lines.get(landmark) if landmark else None
         return f"profile {Path(self.source_file).name or self.name}" + (f" line {line}" if line else "")
 
+    def columns(self, labels: list[str]) -> dict[str, int]:
+        """A recording's labels as the profile names them (prefixes stripped if it says so) -> their columns."""
+        return {strip_prefix(x) if self.strip_prefixes else x: i for i, x in enumerate(labels)}
+
     def resolve(self, labels: list[str]) -> "LandmarkMap":
-        clean = [strip_prefix(x) if self.strip_prefixes else x for x in labels]
-        index = {label: i for i, label in enumerate(clean)}
+        index = self.columns(labels)
+        clean = list(index)
         rows = []
         for landmark, expr in self.landmarks.items():
             names = parse_expression(expr, self.where(landmark))

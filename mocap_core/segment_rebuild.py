@@ -193,6 +193,20 @@ SLID_ALONG_S = 0.25
 N_LANDMARKS = len(LANDMARKS)
 
 
+def segment_landmark(side: str, name: str) -> str:
+    """A name of SEGMENTS as a landmark on one side: "HLE" -> "L_HLE", "other SAE" -> "R_SAE", "TV2" -> "TV2"."""
+    if name in LANDMARK_INDEX:  # the trunk's
+        return name
+    if name.startswith("other "):
+        return f"{'R' if side == 'L' else 'L'}_{name.removeprefix('other ')}"
+    return f"{side}_{name}"
+
+
+def tracking_segment(side: str, bone: str) -> str:
+    """The profile's tracking segment whose markers move with a bone of SEGMENTS ("L_forearm" for the styloids)."""
+    return f"{side}_{FAR_END_OF.get(bone, bone)}"
+
+
 def segment_table(tracking_of: Sequence[str] = ()
                   ) -> tuple[np.ndarray, ...]:
     """Point indices per segment (segments x width; the rebuilt members first, then the partners and the
@@ -207,18 +221,11 @@ def segment_table(tracking_of: Sequence[str] = ()
     def tracks(name):
         return [len(LANDMARKS) + j for j, seg in enumerate(tracking_of) if seg == name]
 
-    def landmark(side, name):
-        if name in LANDMARK_INDEX:  # the trunk's
-            return LANDMARK_INDEX[name]
-        if name.startswith("other "):
-            return LANDMARK_INDEX[f"{'R' if side == 'L' else 'L'}_{name.removeprefix('other ')}"]
-        return LANDMARK_INDEX[f"{side}_{name}"]
-
     rows, counts, pairs = [], [], []
     for side in ("L", "R"):
         for bone, rebuilt, partners in SEGMENTS:
-            own = tracks(f"{side}_{FAR_END_OF.get(bone, bone)}")
-            rigid = [landmark(side, name) for name in rebuilt + partners] + own
+            own = tracks(tracking_segment(side, bone))
+            rigid = [LANDMARK_INDEX[segment_landmark(side, name)] for name in rebuilt + partners] + own
             refined, above, own_too = ALSO_ON.get(bone, ((), "", False))
             distance_only = tracks(f"{side}_{above}") if above else []
             assert rebuilt[:len(refined)] == refined  # the refined ones lead the rebuilt ones

@@ -18,21 +18,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocap_core.profiles import Profile, parse_expression, strip_prefix
-from mocap_core.segment_rebuild import SEGMENTS
+from mocap_core.profiles import Profile, parse_expression
+from mocap_core.segment_rebuild import SEGMENTS, segment_landmark, tracking_segment
 
 TOLERANCE = 0.25  # a pair is off where its distance is off the usual one by more than this part of it,
 FLOOR_M = 0.015   # and by this much at least (skin moves 5-10 mm on a 50 mm toe pair; the Vicon take's inner
-#                   wrist marker slid 16 mm off its 45 mm spacing to the outer one)
+#                   wrist marker is 16 mm off its 45 mm spacing to the outer one for 0.6 s)
 MERGE_S = 0.1     # stretches off closer than this are one
-TRUNK = ("TV2", "TV12", "SME")
-PELVIS = ("pelvis", ("SACR", "L_IAS", "R_IAS"))
+PELVIS = ("pelvis", ("SACR", "L_IAS", "R_IAS"), "")
 
 
 @dataclass(frozen=True)
 class Pair:
     bone: str  # "L_foot", "pelvis", ...
-    a: str     # marker labels, as the recording has them
+    a: str     # marker labels, as the profile names them (prefixes stripped)
     b: str
     ia: int    # their columns in the recording
     ib: int
@@ -60,26 +59,26 @@ class MarkerGaps:
 
 
 def bone_markers(profile: Profile, labels: list[str]) -> dict[str, list[str]]:
-    """Each bone's markers the recording has (two at least), as labelled there: its landmarks' markers and the
-    profile's tracking markers of it."""
-    column = _columns(profile, labels)
-    groups = [(f"{side}_{bone}", [_sided(name, side) for name in names + partners if not name.startswith("other")])
-              for side in "LR" for bone, names, partners in SEGMENTS]
+    """Each bone's markers the recording has (two at least), as the profile names them: its landmarks' markers and
+    the profile's tracking markers of it."""
+    column = profile.columns(labels)
+    groups = [(_bone_name(side, bone, names + partners), [segment_landmark(side, name) for name in names + partners],
+               tracking_segment(side, bone)) for side in "LR" for bone, names, partners in SEGMENTS]
     groups.append(PELVIS)
     out = {}
-    for bone, landmarks in groups:
+    for bone, landmarks, tracking in groups:
         markers = [m for lm in landmarks if lm in profile.landmarks
                    for m in parse_expression(profile.landmarks[lm], profile.where(lm))]
-        markers += profile.tracking.get(bone, [])
+        markers += profile.tracking.get(tracking, [])
         markers = [m for m in dict.fromkeys(markers) if m in column]
-        if len(markers) >= 2:
+        if len(markers) >= 2 and bone not in out:  # (the thorax comes twice)
             out[bone] = markers
     return out
 
 
 def rigid_pairs(profile: Profile, labels: list[str]) -> list[Pair]:
     """Every pair of markers on one bone, each pair once (the first bone that has it)."""
-    column = _columns(profile, labels)
+    column = profile.columns(labels)
     pairs, seen = [], set()
     for bone, markers in bone_markers(profile, labels).items():
         for i, a in enumerate(markers):
@@ -119,19 +118,15 @@ def marker_gaps(positions: np.ndarray, markers: dict[str, int], rate_hz: float) 
 
 def used_markers(profile: Profile, labels: list[str]) -> dict[str, int]:
     """The markers the profile uses (its landmarks' and tracking markers) that the recording has: label -> column."""
-    column = _columns(profile, labels)
+    column = profile.columns(labels)
     names = [m for lm, expr in profile.landmarks.items() for m in parse_expression(expr, profile.where(lm))]
     names += [m for markers in profile.tracking.values() for m in markers]
     return {m: column[m] for m in dict.fromkeys(names) if m in column}
 
 
-def _columns(profile: Profile, labels: list[str]) -> dict[str, int]:
-    clean = [strip_prefix(x) if profile.strip_prefixes else x for x in labels]
-    return {label: i for i, label in enumerate(clean)}
-
-
-def _sided(name: str, side: str) -> str:
-    return name if name in TRUNK else f"{side}_{name}"
+def _bone_name(side: str, bone: str, names: tuple[str, ...]) -> str:
+    """"L_foot"; the thorax, whose segment takes both acromia on either side, is one bone: "thorax"."""
+    return bone if any(name.startswith("other ") for name in names) else f"{side}_{bone}"
 
 
 def _runs(frames: np.ndarray, join: int) -> list[np.ndarray]:
