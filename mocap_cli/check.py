@@ -50,7 +50,8 @@ def run(args) -> int:
 
 def report(rec: Recording, profile: str, gaps: list[MarkerGaps], faults: list[Stretch], left_out: int = 0) -> str:
     lines = [f"# {_name(rec)}: what its markers do wrong", "",
-             f"{rec.n_frames} frames at {rec.rate_hz:g} Hz ({rec.n_frames / rec.rate_hz:.1f} s), profile {profile}.", "",
+             f"{rec.n_frames} frames at {rec.rate_hz:g} Hz ({rec.n_frames / rec.rate_hz:.1f} s), profile {profile}.",
+             "",
              "## Markers lost", ""]
     if gaps:
         lines += ["| marker | frames lost | gaps | longest |", "|---|---|---|---|"]

@@ -9,8 +9,9 @@ of that bone) and the pelvis's three landmarks.
 
 Found on the recordings in ../shared/data (`mocap check`; docs/gap_filling.md traces each):
 dance1's left toe markers 5.9-13.3 s, walk1's right toe markers standing still at 2.5-3.2 s, walk2's left wrist
-markers 4.2-4.8 s, the Vicon take's left inner wrist marker 0-1.6 s (elsewhere on the forearm than later); the Qualisys walk has
-none. The thresholds, and what others give, are in docs/gap_filling.md ("Stop 47: the recordings checked").
+markers 4.2-4.8 s, the Vicon take's left inner wrist marker 0-1.6 s (elsewhere on the forearm than later); the
+Qualisys walk has none. The thresholds, and what others give, are in docs/gap_filling.md ("Stop 47: the recordings
+checked").
 """
 from __future__ import annotations
 
@@ -125,7 +126,8 @@ def used_markers(profile: Profile, labels: list[str]) -> dict[str, int]:
 
 
 def _bone_name(side: str, bone: str, names: tuple[str, ...]) -> str:
-    """"L_foot"; the thorax, whose segment takes both acromia on either side, is one bone: "thorax"."""
+    """A bone's name in the report, "L_foot"; the thorax, whose segment takes both acromia on either side, is one
+    bone: "thorax"."""
     return bone if any(name.startswith("other ") for name in names) else f"{side}_{bone}"
 
 
