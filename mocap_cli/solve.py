@@ -1,4 +1,4 @@
-"""`mocap solve`: a recording through the whole chain offline, to a joints CSV (and BVH later)."""
+"""`mocap solve`: a recording through the whole chain offline, to a joints CSV and/or a BVH file."""
 from __future__ import annotations
 
 import logging
