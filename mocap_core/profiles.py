@@ -80,12 +80,16 @@ class Profile(BaseModel):
         """A recording's labels as the profile names them (prefixes stripped if it says so) -> their columns."""
         return {strip_prefix(x) if self.strip_prefixes else x: i for i, x in enumerate(labels)}
 
+    def markers_of(self, landmark: str) -> list[str]:
+        """The labels a landmark is the mean of (one for most)."""
+        return parse_expression(self.landmarks[landmark], self.where(landmark))
+
     def resolve(self, labels: list[str]) -> "LandmarkMap":
         index = self.columns(labels)
         clean = list(index)
         rows = []
-        for landmark, expr in self.landmarks.items():
-            names = parse_expression(expr, self.where(landmark))
+        for landmark in self.landmarks:
+            names = self.markers_of(landmark)
             missing = [n for n in names if n not in index]
             if missing:
                 shown = ", ".join(clean[:60]) + (" ..." if len(clean) > 60 else "")
@@ -182,11 +186,11 @@ def load_profile(name_or_path: str | Path) -> Profile:
     except ValidationError as e:
         err = e.errors()[0]
         raise ProfileError(f"profile {path.name}: {'.'.join(map(str, err['loc']))}: {err['msg']}") from None
-    for landmark, expr in profile.landmarks.items():
+    for landmark in profile.landmarks:
         if landmark not in LANDMARK_INDEX:
             raise ProfileError(f"{profile.where(landmark)}: unknown landmark {landmark!r} "
                                f"(landmarks: {', '.join(LANDMARKS)})")
-        parse_expression(expr, profile.where(landmark))
+        profile.markers_of(landmark)  # a bad expression is an error when the profile is loaded
     for segment in profile.tracking:
         if segment not in TRACKING_SEGMENTS:
             raise ProfileError(f"{profile.where()}: unknown tracking segment {segment!r} "

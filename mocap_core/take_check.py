@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocap_core.profiles import Profile, parse_expression
+from mocap_core.profiles import Profile
 from mocap_core.segment_rebuild import SEGMENTS, segment_landmark, tracking_segment
 
 TOLERANCE = 0.25  # a pair is off where its distance is off the usual one by more than this part of it,
@@ -68,8 +68,7 @@ def bone_markers(profile: Profile, labels: list[str]) -> dict[str, list[str]]:
     groups.append(PELVIS)
     out = {}
     for bone, landmarks, tracking in groups:
-        markers = [m for lm in landmarks if lm in profile.landmarks
-                   for m in parse_expression(profile.landmarks[lm], profile.where(lm))]
+        markers = [m for lm in landmarks if lm in profile.landmarks for m in profile.markers_of(lm)]
         markers += profile.tracking.get(tracking, [])
         markers = [m for m in dict.fromkeys(markers) if m in column]
         if len(markers) >= 2 and bone not in out:  # (the thorax comes twice)
@@ -120,7 +119,7 @@ def marker_gaps(positions: np.ndarray, markers: dict[str, int], rate_hz: float) 
 def used_markers(profile: Profile, labels: list[str]) -> dict[str, int]:
     """The markers the profile uses (its landmarks' and tracking markers) that the recording has: label -> column."""
     column = profile.columns(labels)
-    names = [m for lm, expr in profile.landmarks.items() for m in parse_expression(expr, profile.where(lm))]
+    names = [m for lm in profile.landmarks for m in profile.markers_of(lm)]
     names += [m for markers in profile.tracking.values() for m in markers]
     return {m: column[m] for m in dict.fromkeys(names) if m in column}
 
