@@ -341,7 +341,7 @@ def twist_angle(Rb, ref):
 
 
 @njit(cache=True)
-def _clamp_twist(alpha, lo, hi):
+def clamp_twist(alpha, lo, hi):
     """Nearest angle in [lo, hi] on the circle (returns alpha itself when inside)."""
     if lo <= alpha <= hi:
         return alpha
@@ -366,7 +366,7 @@ def constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist):
                 moved = True
     if has_twist[i]:
         alpha = twist_angle(R[i], ref)
-        target = _clamp_twist(alpha, twists[i, 0], twists[i, 1])
+        target = clamp_twist(alpha, twists[i, 0], twists[i, 1])
         if target != alpha:
             y = R[i][:, 1].copy()
             rot = axis_angle(y / vnorm(y), target - alpha)

@@ -1,0 +1,96 @@
+"""Calibrating a subject from a take's or a stream's own frames, without a calibration pose.
+
+The thesis's localization (mocap_core.localization) locates joints and bone frames from the profile's
+landmarks in every frame where they are seen. Over many such frames, robustly (medians):
+- each joint's offset in its parent's bone frame, hence every bone's length; left and right bones get
+  their mean length where both sides are seen;
+- for every labelled marker, landmark or not, the bone it moves rigidly with: the bone in whose frame it
+  strays least (the median distance from its median offset there), and that offset. A marker that moves
+  with no bone (a prop, the floor, a marker that slides) is left unassigned.
+The profile's landmarks only seed the bone frames; every other marker (clusters, wands, extra markers)
+is found from the data, so a profile needs no ``tracking:`` list for the fit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocap_core.fit.subject import Subject
+from mocap_core.localization import Localizer
+from mocap_core.profiles import Profile
+from mocap_core.skeleton import END_SITES, INDEX, JOINTS, PARENT_INDEX
+
+
+@dataclass
+class CalibrationSettings:
+    max_frames: int = 3000          # frames spread evenly over the input are enough for medians
+    min_frames: int = 20            # a bone or marker seen in fewer frames is not calibrated
+    max_spread_m: float = 0.03      # a marker straying more than this on its best bone rides no bone
+    symmetric: bool = True          # left and right bones of one length where both are seen
+
+
+ROTATING = np.array([j not in END_SITES for j in JOINTS])
+_PAIRS = [(INDEX[j], INDEX[j[:-1] + "r"]) for j in JOINTS if j.endswith("_l")]
+
+
+def calibrate(markers: np.ndarray, labels: list[str], profile: Profile,
+              settings: CalibrationSettings | None = None) -> Subject:
+    """``markers``: (F, M, 3) metres, NaN where not seen, columns named by ``labels``."""
+    s = settings or CalibrationSettings()
+    markers = np.asarray(markers, np.float64)
+    if len(markers) > s.max_frames:
+        markers = markers[np.linspace(0, len(markers) - 1, s.max_frames).round().astype(int)]
+    landmark_map = profile.resolve(labels)
+    loc = Localizer(profile.body).localize(landmark_map.apply(markers))
+    offsets, known, rest = joint_offsets(loc.positions, loc.frames, s)
+    bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s)
+    clean = list(profile.columns(labels))
+    return Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest)
+
+
+def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
+    """Each joint's median position in its parent's frame over the frames where both are located, and its
+    typical rotation there (the chordal mean); the root is known where it is ever located."""
+    n = P.shape[1]
+    offsets, known, rest = np.zeros((n, 3)), np.zeros(n, bool), np.tile(np.eye(3), (n, 1, 1))
+    known[0] = np.isfinite(P[:, 0]).all(axis=1).sum() >= s.min_frames
+    for j in range(1, n):
+        p = PARENT_INDEX[j]
+        local = np.einsum("fba,fb->fa", R[:, p], P[:, j] - P[:, p])
+        ok = np.isfinite(local).all(axis=1) & np.isfinite(R[:, p]).all(axis=(1, 2))
+        if ok.sum() < s.min_frames or not known[p]:
+            continue
+        offsets[j], known[j] = np.median(local[ok], axis=0), True
+        turns = np.einsum("fba,fbc->fac", R[ok, p], R[ok, j])
+        turns = turns[np.isfinite(turns).all(axis=(1, 2))]
+        if len(turns):
+            u, _, vt = np.linalg.svd(turns.mean(axis=0))
+            rest[j] = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    if s.symmetric:
+        for left, right in _PAIRS:
+            if known[left] and known[right]:
+                a, b = np.linalg.norm(offsets[left]), np.linalg.norm(offsets[right])
+                if a > 0 and b > 0:
+                    mean = (a + b) / 2
+                    offsets[left] *= mean / a
+                    offsets[right] *= mean / b
+    return offsets, known, rest
+
+
+def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.ndarray, s: CalibrationSettings):
+    """For every marker: the bone it strays least on, its median offset there and that stray (-1 / NaN: none)."""
+    m = markers.shape[1]
+    best = np.full(m, np.inf)
+    bone, offset = np.full(m, -1, np.int64), np.zeros((m, 3))
+    for b in np.flatnonzero(ROTATING & known):
+        local = np.einsum("fba,fmb->fma", R[:, b], markers - P[:, b, None])  # (F, M, 3)
+        ok = np.isfinite(local).all(axis=2)
+        count = ok.sum(axis=0)
+        with np.errstate(invalid="ignore"):
+            med = np.nanmedian(np.where(ok[..., None], local, np.nan), axis=0)
+            stray = np.nanmedian(np.linalg.norm(local - med, axis=2), axis=0)
+        better = (count >= s.min_frames) & (stray < best)
+        best[better], bone[better], offset[better] = stray[better], b, med[better]
+    bone[~(best <= s.max_spread_m)] = -1
+    return bone, offset, np.where(bone >= 0, best, np.nan)

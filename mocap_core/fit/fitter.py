@@ -1,0 +1,172 @@
+"""The rigid-skeleton fit, frame by frame: a calibrated subject brought onto the markers seen (DESIGN).
+
+In the style of mink's typed IK core: the configuration is the pose (root position, bone frames), the
+tasks are the markers and the motion prior, the limits are the thesis's cone and twist limits, and
+one solve (``mocap_core.fit.kernel.fit_pose``) runs damped Gauss-Newton warm-started from the last
+frame. Closest of the thesis's four solvers to damped least squares (its DLS), but over the whole
+body at once and on markers rather than on joint targets.
+
+Status of the joints: ``located`` where a seen marker rides the bone that carries the joint or the bone
+that starts there; ``estimated`` where the pose of nearby bones and the motion prior place it;
+``missing`` for a joint the calibration never located (a set with no hand marker has no hand).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocap_core.fit.calibration import ROTATING
+from mocap_core.fit.kernel import fit_pose, forward, limit_locals
+from mocap_core.fit.subject import Subject
+from mocap_core.ik.constraints import Constraints, load_constraints
+from mocap_core.skeleton import N_JOINTS, PARENT_INDEX, Status
+
+
+@dataclass
+class FitSettings:
+    """Noise scales of the tasks (their weights are 1 / scale^2) and the solve's bounds."""
+    marker_sigma_m: float = 0.01      # how far a seen marker may sit off its calibrated place (skin, noise)
+    robust_m: float = 0.03            # Cauchy scale: a marker this far off counts half, 10x as far 1 %
+    rotation_sigma_rad: float = 0.2   # how far a bone may turn against its parent from one frame to the next
+    root_sigma_m: float = 0.05        # how far the root may move from its predicted place in a frame
+    posture_sigma_rad: float = 1.0    # how far a bone may turn from its typical rotation in its parent's frame
+    max_iterations: int = 6
+    start_iterations: int = 60        # the first frame (and a re-start) begins from the rest pose
+    tolerance: float = 1e-4           # a step smaller than this (radians, metres) ends the solve
+    limits: bool = True               # the thesis's cone and twist limits on what the motion task predicts
+    located_weight: float = 0.5       # a marker counts as seen (for the status) above this robust weight
+
+
+@dataclass
+class FitFrame:
+    positions: np.ndarray   # (J, 3)
+    frames: np.ndarray      # (J, 3, 3)
+    status: np.ndarray      # (J,) uint8
+    residual_m: float       # RMS distance of the seen markers from their calibrated places
+    iterations: int
+
+
+def _chains() -> np.ndarray:
+    """(J, depth): each bone's rotating ancestors, itself first, padded with -1."""
+    rows = []
+    for j in range(N_JOINTS):
+        chain, k = [], j
+        while k >= 0:
+            if ROTATING[k]:
+                chain.append(k)
+            k = PARENT_INDEX[k]
+        rows.append(chain)
+    out = np.full((N_JOINTS, max(map(len, rows))), -1, np.int64)
+    for j, chain in enumerate(rows):
+        out[j, :len(chain)] = chain
+    return out
+
+
+CHAINS = _chains()
+
+
+def rigid_fit(local: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation and origin that carry points ``local`` (n, 3) onto ``world`` (Kabsch)."""
+    lc, wc = local.mean(axis=0), world.mean(axis=0)
+    u, _, vt = np.linalg.svd((world - wc).T @ (local - lc))
+    R = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    return R, wc - R @ lc
+SLOT = np.where(ROTATING, 3 + 3 * (np.cumsum(ROTATING) - 1), -1).astype(np.int64)
+
+
+class SkeletonFitter:
+    """Owns one actor's pose from frame to frame. ``labels``: the stream's marker labels (the subject's names,
+    prefixes stripped as the profile says)."""
+
+    def __init__(self, subject: Subject, labels: list[str], settings: FitSettings | None = None,
+                 constraints: Constraints | None = None):
+        self.subject = subject
+        self.settings = s = settings or FitSettings()
+        rows = subject.marker_index(labels)
+        self.bone = np.where(rows >= 0, subject.marker_bone[np.maximum(rows, 0)], -1).astype(np.int64)
+        self.bone[~subject.known[np.maximum(self.bone, 0)]] = -1
+        self.offsets_m = np.where(rows[:, None] >= 0, subject.marker_offsets[np.maximum(rows, 0)], 0.0)
+        self.limits = constraints or load_constraints()
+        self.weights = np.array([1 / s.marker_sigma_m ** 2, s.robust_m, 1 / s.root_sigma_m ** 2])
+        self.w_rot = np.full(N_JOINTS, 1 / s.rotation_sigma_rad ** 2)
+        self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / s.posture_sigma_rad ** 2, 0.0)
+        self.root = np.zeros(3)
+        self.R = np.tile(np.eye(3), (N_JOINTS, 1, 1))
+        self.started = False
+        self._P = np.zeros((N_JOINTS, 3))
+        self._w = np.zeros(len(labels))
+        self._on_parent = np.zeros((N_JOINTS, len(labels)), bool)  # joint j is located by markers on these bones
+        for j in range(N_JOINTS):
+            carriers = {j, PARENT_INDEX[j]} if ROTATING[j] else {PARENT_INDEX[j]}
+            self._on_parent[j] = np.isin(self.bone, list(carriers))
+
+    def reset(self) -> None:
+        self.started = False
+
+    def fit(self, x: np.ndarray) -> FitFrame:
+        """One frame's markers (M, 3) metres, NaN where not seen -> the pose."""
+        x = np.ascontiguousarray(x, np.float64)
+        if not self.started and not self._start(x):
+            return self._missing()
+        s = self.settings
+        L_pred = self._locals()
+        if s.limits:
+            c = self.limits
+            limit_locals(L_pred, c.pp, c.cones, c.has_cone, c.twists, c.has_twist)
+        iterations, residual = self._solve(x, self.root.copy(), L_pred, s.max_iterations)
+        return self._frame(residual, iterations)
+
+    def _start(self, x: np.ndarray) -> bool:
+        """The first pose: each bone with three markers seen by a rigid fit of them, every other bone at its
+        rest rotation in its parent's frame, then a long solve with a weak motion prior."""
+        seen = np.isfinite(x).all(axis=1)
+        if ((self.bone == 0) & seen).sum() < 3:
+            return False
+        for j in range(N_JOINTS):
+            on = (self.bone == j) & seen
+            if ROTATING[j] and on.sum() >= 3:
+                self.R[j], origin = rigid_fit(self.offsets_m[on], x[on])
+                if j == 0:
+                    self.root = origin
+            elif j > 0:
+                self.R[j] = self.R[PARENT_INDEX[j]] @ (self.subject.rest[j] if ROTATING[j] else np.eye(3))
+        # least squares first (a far start would have the robust loss ignore whole limbs), then robust
+        self._solve(x, self.root.copy(), self._locals(), self.settings.start_iterations, weak=True, robust_m=1.0)
+        self._solve(x, self.root.copy(), self._locals(), self.settings.start_iterations, weak=True)
+        self.started = True
+        return True
+
+    def _locals(self) -> np.ndarray:
+        """Each bone's rotation in its parent's frame (the root's in the world): the motion task's prediction."""
+        L = np.empty_like(self.R)
+        L[0] = self.R[0]
+        L[1:] = np.einsum("jba,jbc->jac", self.R[PARENT_INDEX[1:]], self.R[1:])
+        return L
+
+    def _solve(self, x, root_pred, L_pred, iterations, weak=False, robust_m=None):
+        s = self.settings
+        w_rot = self.w_rot * (1e-4 if weak else 1.0)
+        w_root = self.weights[2] * (1e-4 if weak else 1.0)
+        return fit_pose(self.root, self.R, x, self.bone, self.offsets_m, PARENT_INDEX, self.subject.offsets, SLOT,
+                        CHAINS, ROTATING, root_pred, L_pred, self.weights[0], robust_m or self.weights[1], w_rot, w_root,
+                        self.subject.rest, self.w_rest,
+                        iterations, s.tolerance,
+                        self._P, self._w)
+
+    def _frame(self, residual: float, iterations: int) -> FitFrame:
+        seen = self._w > self.settings.located_weight
+        status = np.where((self._on_parent & seen).any(axis=1), Status.LOCATED, Status.ESTIMATED).astype(np.uint8)
+        P, R = self._P.copy(), self.R.copy()
+        unknown = ~self.subject.known
+        status[unknown], P[unknown], R[unknown] = Status.MISSING, np.nan, np.nan
+        return FitFrame(P, R, status, residual, iterations)
+
+    def _missing(self) -> FitFrame:
+        return FitFrame(np.full((N_JOINTS, 3), np.nan), np.full((N_JOINTS, 3, 3), np.nan),
+                        np.full(N_JOINTS, Status.MISSING, np.uint8), float("nan"), 0)
+
+    def pose_positions(self) -> np.ndarray:
+        P = np.zeros((N_JOINTS, 3))
+        forward(self.root, self.R, PARENT_INDEX, self.subject.offsets, P)
+        return P
