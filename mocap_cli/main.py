@@ -7,6 +7,7 @@ import logging
 import sys
 from pathlib import Path
 
+from mocap_core.fit.subject import SubjectError
 from mocap_core.ik.constraints import ConstraintsError
 from mocap_core.ik.solvers import UnknownSolver
 from mocap_core.profiles import ProfileError
@@ -131,7 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.log_level)
     try:
         return args.func(args) or 0
-    except (LaunchError, NoGraph, RecordingError, ProfileError, ConstraintsError, UnknownSolver, BagError) as e:
+    except (LaunchError, NoGraph, RecordingError, ProfileError, ConstraintsError, UnknownSolver, BagError,
+            SubjectError) as e:
         logging.getLogger("mocap").error("%s", e)
         return 2
     except KeyboardInterrupt:

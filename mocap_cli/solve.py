@@ -32,6 +32,10 @@ def add_parser(sub) -> None:
                    help="fill gaps exactly as the thesis did (default: with the improvements the studio launch files "
                         "use: hips fitted to the body, lost forearm and foot markers rebuilt, swivel, segment carry, "
                         "re-acquisition blend)")
+    s.add_argument("--fit", action="store_true",
+                   help="fit a calibrated rigid skeleton to every marker each frame (calibrated from this take, "
+                        "or from --subject); bones keep their lengths")
+    s.add_argument("--subject", help="subject file from `mocap calibrate` (implies --fit)")
     s.add_argument("--constraints", help="joint-limit YAML (default: the thesis's values)")
     s.add_argument("--max-iterations", type=int, default=140)
     s.add_argument("--stop-distance", type=float, default=0.01, help="IK stop distance in metres")
@@ -46,10 +50,33 @@ def run(args) -> int:
         raise SystemExit("mocap solve: give --joints-out OUT.csv and/or --bvh-out OUT.bvh")
     rec = read_recording(args.file)
     profile = load_profile(args.profile)
+    if args.fit or args.subject:
+        if args.thesis or args.no_ik:
+            raise SystemExit("mocap solve: --fit/--subject is a method of its own; drop --thesis/--no-ik")
+        return _write(args, rec, profile, _fitted(args, rec, profile))
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)
     pipe = SkeletonPipeline(profile, rec.labels, args.solver, params, load_constraints(args.constraints),
                             fill_gaps=not args.no_ik, beyond=not args.thesis, rate_hz=rec.rate_hz)
+    return _write(args, rec, profile, pipe.run(rec.positions))
+
+
+def _fitted(args, rec, profile):
+    """The fit's frames, as one chunk (calibrating first unless a subject file is given)."""
+    from mocap_core.fit.fitter import FitSettings
+    from mocap_core.fit.subject import load_subject
+    from mocap_core.fit.take import fit_take
+
+    subject = load_subject(args.subject) if args.subject else None
+    if subject is None:
+        log.info("calibrating the subject from the take (save one with `mocap calibrate` to reuse it)")
+    settings = FitSettings(limits=not args.no_constraints)
+    with tqdm(total=rec.n_frames, unit="frame", disable=args.quiet, desc=f"fitting {rec.source.split('/')[-1]}") as bar:
+        chunk, _, _ = fit_take(rec.positions, rec.labels, profile, subject, settings, progress=bar.update)
+    return [chunk]
+
+
+def _write(args, rec, profile, chunks) -> int:
     times = rec.times()
     counts = {s: 0 for s in Status}
     t0 = time.perf_counter()
@@ -57,7 +84,7 @@ def run(args) -> int:
     bvh = BvhWriter(args.bvh_out, rec.rate_hz, profile.up_axis) if args.bvh_out else None
     with tqdm(total=rec.n_frames, unit="frame", disable=args.quiet,
               desc=f"solving {rec.source.split('/')[-1]}") as bar:
-        for chunk in pipe.run(rec.positions):
+        for chunk in chunks:
             for k in range(len(chunk.positions)):
                 f = chunk.start + k
                 if out:

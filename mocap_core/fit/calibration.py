@@ -5,14 +5,14 @@ landmarks in every frame where they are seen. Over many such frames, robustly (m
 - each joint's offset in its parent's bone frame, hence every bone's length; left and right bones get
   their mean length where both sides are seen;
 - for every labelled marker, landmark or not, the bone it moves rigidly with: the bone in whose frame it
-  strays least (the median distance from its median offset there), and that offset. A marker that moves
+  strays least (the 90th percentile of its distance from its median offset there), and that offset. A marker that moves
   with no bone (a prop, the floor, a marker that slides) is left unassigned.
 The profile's landmarks only seed the bone frames; every other marker (clusters, wands, extra markers)
 is found from the data, so a profile needs no ``tracking:`` list for the fit.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,10 +26,14 @@ from mocap_core.skeleton import END_SITES, INDEX, JOINTS, PARENT_INDEX
 class CalibrationSettings:
     max_frames: int = 3000          # frames spread evenly over the input are enough for medians
     min_frames: int = 20            # a bone or marker seen in fewer frames is not calibrated
-    max_spread_m: float = 0.03      # a marker straying more than this on its best bone rides no bone
+    max_spread_m: float = 0.04      # a marker straying more than this on its best bone rides no bone
     symmetric: bool = True          # left and right bones of one length where both are seen
+    refinements: int = 1            # rounds of markers re-placed on the fitted bone frames
 
 
+# A marker's stray on a bone: how far from its median place it is in this share of the frames. Not the median:
+# a static marker (a starting block) rides a limb that rests on it for half the take.
+STRAY_PERCENTILE = 90
 ROTATING = np.array([j not in END_SITES for j in JOINTS])
 _PAIRS = [(INDEX[j], INDEX[j[:-1] + "r"]) for j in JOINTS if j.endswith("_l")]
 
@@ -46,7 +50,10 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile,
     offsets, known, rest = joint_offsets(loc.positions, loc.frames, s)
     bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s)
     clean = list(profile.columns(labels))
-    return Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest)
+    subject = Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest)
+    for _ in range(s.refinements):
+        subject = refine(subject, markers, clean, s)
+    return subject
 
 
 def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
@@ -79,18 +86,51 @@ def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
 
 
 def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.ndarray, s: CalibrationSettings):
-    """For every marker: the bone it strays least on, its median offset there and that stray (-1 / NaN: none)."""
+    """For every marker: the bone it strays least on, its median offset there and that stray (-1 / NaN: none).
+    Two bones are compared on the frames where both are located with the marker seen: a bone located in a few
+    frames only would otherwise win on the little it moved in them."""
     m = markers.shape[1]
-    best = np.full(m, np.inf)
-    bone, offset = np.full(m, -1, np.int64), np.zeros((m, 3))
-    for b in np.flatnonzero(ROTATING & known):
-        local = np.einsum("fba,fmb->fma", R[:, b], markers - P[:, b, None])  # (F, M, 3)
-        ok = np.isfinite(local).all(axis=2)
-        count = ok.sum(axis=0)
-        with np.errstate(invalid="ignore"):
-            med = np.nanmedian(np.where(ok[..., None], local, np.nan), axis=0)
-            stray = np.nanmedian(np.linalg.norm(local - med, axis=2), axis=0)
-        better = (count >= s.min_frames) & (stray < best)
-        best[better], bone[better], offset[better] = stray[better], b, med[better]
-    bone[~(best <= s.max_spread_m)] = -1
-    return bone, offset, np.where(bone >= 0, best, np.nan)
+    candidates = np.flatnonzero(ROTATING & known)
+    local = np.einsum("fbxa,fbmx->fbma", R[:, candidates], markers[:, None] - P[:, candidates, None])  # (F,B,M,3)
+    ok = np.isfinite(local).all(axis=3)
+    bone, offset, spread = np.full(m, -1, np.int64), np.zeros((m, 3)), np.full(m, np.nan)
+
+    def stray(b, k, frames):
+        pts = local[frames, b, k]
+        return np.percentile(np.linalg.norm(pts - np.median(pts, axis=0), axis=1), STRAY_PERCENTILE)
+
+    for k in range(m):
+        best = -1
+        for b in range(len(candidates)):
+            if ok[:, b, k].sum() < s.min_frames:
+                continue
+            if best < 0:
+                best = b
+                continue
+            both = ok[:, b, k] & ok[:, best, k]
+            if both.sum() >= s.min_frames:
+                if stray(b, k, both) < stray(best, k, both):
+                    best = b
+            elif ok[:, b, k].sum() > ok[:, best, k].sum():
+                best = b
+        if best >= 0:
+            frames = ok[:, best, k]
+            spread[k] = stray(best, k, frames)
+            if spread[k] <= s.max_spread_m:
+                bone[k], offset[k] = candidates[best], np.median(local[frames, best, k], axis=0)
+    return bone, offset, np.where(bone >= 0, spread, np.nan)
+
+
+def refine(subject: Subject, markers: np.ndarray, labels: list[str], s: CalibrationSettings) -> Subject:
+    """The markers' bones and offsets again, from the fitted bone frames: the fit places every bone in every
+    frame, so each marker is judged on every bone over the same frames, and on frames that its neighbours'
+    markers fix (the localization's frames lean on a few landmarks each)."""
+    from mocap_core.fit.fitter import SkeletonFitter
+    fitter = SkeletonFitter(subject, labels)
+    n = len(markers)
+    P, R = np.full((n, len(JOINTS), 3), np.nan), np.full((n, len(JOINTS), 3, 3), np.nan)
+    for f in range(n):
+        out = fitter.fit(markers[f])
+        P[f], R[f] = out.positions, out.frames
+    bone, c, spread = marker_offsets(markers, P, R, subject.known, s)
+    return replace(subject, marker_bone=bone, marker_offsets=c, spread_m=spread)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocap_core.fit.calibration import ROTATING
-from mocap_core.fit.kernel import fit_pose, forward, limit_locals
+from mocap_core.fit.kernel import fit_pose, forward, limit_locals, predict_locals
 from mocap_core.fit.subject import Subject
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.skeleton import N_JOINTS, PARENT_INDEX, Status
@@ -30,6 +30,7 @@ class FitSettings:
     robust_m: float = 0.03            # Cauchy scale: a marker this far off counts half, 10x as far 1 %
     rotation_sigma_rad: float = 0.2   # how far a bone may turn against its parent from one frame to the next
     root_sigma_m: float = 0.05        # how far the root may move from its predicted place in a frame
+    keep_turning: float = 0.9         # share of a bone's last turn (in its parent) the motion task expects again
     posture_sigma_rad: float = 1.0    # how far a bone may turn from its typical rotation in its parent's frame
     max_iterations: int = 6
     start_iterations: int = 60        # the first frame (and a re-start) begins from the rest pose
@@ -92,6 +93,7 @@ class SkeletonFitter:
         self.w_rot = np.full(N_JOINTS, 1 / s.rotation_sigma_rad ** 2)
         self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / s.posture_sigma_rad ** 2, 0.0)
         self.root = np.zeros(3)
+        self.velocity = np.zeros(3)  # the root's last step: the motion task predicts it goes on
         self.R = np.tile(np.eye(3), (N_JOINTS, 1, 1))
         self.started = False
         self._P = np.zeros((N_JOINTS, 3))
@@ -110,30 +112,40 @@ class SkeletonFitter:
         if not self.started and not self._start(x):
             return self._missing()
         s = self.settings
-        L_pred = self._locals()
+        L = self._locals()
+        L_pred = np.empty_like(L)
+        predict_locals(L, self._L_before, s.keep_turning, L_pred)
+        self._L_before = L
         if s.limits:
             c = self.limits
             limit_locals(L_pred, c.pp, c.cones, c.has_cone, c.twists, c.has_twist)
-        iterations, residual = self._solve(x, self.root.copy(), L_pred, s.max_iterations)
+        root_pred = self.root + self.velocity
+        before = self.root.copy()
+        iterations, residual = self._solve(x, root_pred, L_pred, s.max_iterations)
+        self.velocity = self.root - before
         return self._frame(residual, iterations)
 
     def _start(self, x: np.ndarray) -> bool:
-        """The first pose: each bone with three markers seen by a rigid fit of them, every other bone at its
-        rest rotation in its parent's frame, then a long solve with a weak motion prior."""
-        seen = np.isfinite(x).all(axis=1)
-        if ((self.bone == 0) & seen).sum() < 3:
+        """The first pose: the subject at rest (every bone at its typical rotation in its parent's frame) placed by
+        a rigid fit of the seen markers on the pelvis and the bones it carries (three at least), then a long
+        solve with a weak motion prior."""
+        for j in range(1, N_JOINTS):
+            self.R[j] = self.subject.rest[j] if ROTATING[j] else np.eye(3)
+            self.R[j] = self.R[PARENT_INDEX[j]] @ self.R[j]
+        self.root = np.zeros(3)
+        P = self.pose_positions()
+        near = np.isin(self.bone, [0] + [j for j in range(1, N_JOINTS) if PARENT_INDEX[j] == 0])
+        use = near & np.isfinite(x).all(axis=1)
+        if use.sum() < 3:
             return False
-        for j in range(N_JOINTS):
-            on = (self.bone == j) & seen
-            if ROTATING[j] and on.sum() >= 3:
-                self.R[j], origin = rigid_fit(self.offsets_m[on], x[on])
-                if j == 0:
-                    self.root = origin
-            elif j > 0:
-                self.R[j] = self.R[PARENT_INDEX[j]] @ (self.subject.rest[j] if ROTATING[j] else np.eye(3))
+        rest = P[self.bone[use]] + np.einsum("mab,mb->ma", self.R[self.bone[use]], self.offsets_m[use])
+        turn, self.root = rigid_fit(rest, x[use])
+        self.R = np.einsum("ab,jbc->jac", turn, self.R)
         # least squares first (a far start would have the robust loss ignore whole limbs), then robust
         self._solve(x, self.root.copy(), self._locals(), self.settings.start_iterations, weak=True, robust_m=1.0)
         self._solve(x, self.root.copy(), self._locals(), self.settings.start_iterations, weak=True)
+        self.velocity = np.zeros(3)
+        self._L_before = self._locals()
         self.started = True
         return True
 

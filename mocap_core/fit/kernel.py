@@ -68,6 +68,15 @@ def _limit(R, p, pp, cone, has_cone, twist, has_twist):
 
 
 @njit(cache=True)
+def predict_locals(L, L_before, keep, out):
+    """Each bone's next local rotation (J, 3, 3) if it goes on turning as it did over the last frame, that turn
+    scaled by ``keep`` (so a bone that nothing sees comes to rest against its parent)."""
+    for k in range(L.shape[0]):
+        step = rotation_vector(mm(L[k], L_before[k].T))
+        out[k] = mm(expm(keep * step), L[k])
+
+
+@njit(cache=True)
 def limit_locals(L, pp, cones, has_cone, twists, has_twist):
     """Each bone's rotation in its parent's frame (J, 3, 3) brought inside its limits, in place."""
     eye = np.eye(3)

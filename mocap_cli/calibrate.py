@@ -1,0 +1,46 @@
+"""`mocap calibrate`: a subject's skeleton and marker offsets from a take, as a subject file (YAML)."""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from mocap_core.fit.calibration import calibrate
+from mocap_core.profiles import load_profile
+from mocap_core.recordings import read_recording
+from mocap_core.skeleton import JOINTS
+
+log = logging.getLogger("mocap.calibrate")
+
+
+def add_parser(sub) -> None:
+    s = sub.add_parser("calibrate", help="calibrate a subject (bones, marker offsets) from a take",
+                       description="Learn the actor's bone lengths and, for every labelled marker, the bone it "
+                                   "rides and its offset there, from the take's own frames (no calibration "
+                                   "pose needed), and write a subject file for `mocap solve --subject` and the "
+                                   "skeleton_fit node.")
+    s.add_argument("file", help="recording: .c3d, .trc or .mat (file.mat:take picks a take)")
+    s.add_argument("--profile", required=True, help="marker-set profile: a name from profiles/ or a YAML path")
+    s.add_argument("-o", "--out", required=True, help="subject file to write (YAML)")
+    s.add_argument("--seconds", type=float, help="learn from the first SECONDS only (default: the whole take)")
+    s.set_defaults(func=run)
+
+
+def run(args) -> int:
+    rec = read_recording(args.file)
+    if args.seconds:
+        rec = rec.slice(0, max(1, int(args.seconds * rec.rate_hz)))
+    profile = load_profile(args.profile)
+    subject = calibrate(rec.positions, rec.labels, profile)
+    subject.save(args.out)
+    lengths = subject.lengths()
+    named = [f"{j} {lengths[i] * 1000:.0f}" for i, j in enumerate(JOINTS) if subject.known[i] and i > 0]
+    unassigned = [x for x, b in zip(subject.labels, subject.marker_bone) if b < 0]
+    log.info("%s: %d frames, %d of %d markers on a bone (median stray %.1f mm)%s; bones (mm): %s",
+             args.out, subject.frames, int((subject.marker_bone >= 0).sum()), len(subject.labels),
+             float(np.nanmedian(subject.spread_m) * 1000),
+             f", on none: {', '.join(unassigned)}" if unassigned else "", ", ".join(named))
+    missing = [j for i, j in enumerate(JOINTS) if not subject.known[i]]
+    if missing:
+        log.warning("never located, so not solved: %s (the profile lacks their landmarks)", ", ".join(missing))
+    return 0

@@ -1,0 +1,104 @@
+"""The thesis's method, the studio options and the fit side by side on one take (``mocap eval rigid``).
+
+Each case hides markers (by label, so every method sees the same input) from a time on, solves the take
+three ways and measures the hidden joints against the localization of the complete take; with nothing
+hidden it measures how much the bones' lengths wander. The fit calibrates from the same hidden take.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocap_core.fit.take import fit_take
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.profiles import Profile
+from mocap_core.recordings import Recording
+from mocap_core.skeleton import INDEX, PARENT_INDEX
+
+METHODS = ("thesis", "studio", "fit")
+# What the thesis's worst case keeps (thesis 4.3): the pelvis, head, hand and toe markers.
+WORST_CASE_LANDMARKS = ("SACR", "L_IAS", "R_IAS", "SGL", "L_HEAD", "R_HEAD", "L_HM2", "R_HM2", "L_FM2", "R_FM2")
+HIDE_LANDMARKS = {"elbow": ("HLE", "HME"), "knee_ankle": ("FLE", "FME", "TTC", "FAL", "TAM")}
+MEASURED = {"elbow": ("elbow",), "knee_ankle": ("knee", "ankle")}
+LIMB_BONES = tuple(INDEX[f"{j}_{s}"] for s in "lr" for j in ("elbow", "wrist", "hand", "knee", "ankle", "foot", "toe"))
+
+
+@dataclass
+class Case:
+    name: str                 # all, worst, elbow_l, knee_ankle_r, ...
+    hidden: list[str]         # labels hidden from ``start`` on
+    measured: list[str]       # joints measured against the reference
+    start: int
+
+
+def cases(profile: Profile, labels: list[str], start: int) -> list[Case]:
+    """The cases every take gets: nothing hidden, the thesis's worst case, each elbow, each knee and ankle."""
+    clean = list(profile.columns(labels))
+
+    def labels_of(landmarks):
+        return sorted({n for lm in landmarks if lm in profile.landmarks for n in profile.markers_of(lm)})
+
+    kept = set(labels_of(WORST_CASE_LANDMARKS))
+    out = [Case("all", [], [], start),
+           Case("worst", [x for x in clean if x not in kept], ["elbow_l", "elbow_r", "knee_l", "knee_r"], start)]
+    for kind, names in HIDE_LANDMARKS.items():
+        for side in "lr":
+            hidden = labels_of([f"{side.upper()}_{n}" for n in names])
+            if hidden:
+                out.append(Case(f"{kind}_{side}", hidden, [f"{j}_{side}" for j in MEASURED[kind]], start))
+    return out
+
+
+def solve(method: str, markers: np.ndarray, rec: Recording, profile: Profile):
+    """(positions (F, J, 3), residual RMS per frame or None, subject or None) of one method."""
+    if method == "fit":
+        chunk, residual, subject = fit_take(markers, rec.labels, profile)
+        return chunk.positions, residual, subject
+    pipe = SkeletonPipeline(profile, rec.labels, beyond=method == "studio", rate_hz=rec.rate_hz)
+    return np.concatenate([c.positions for c in pipe.run(markers)]), None, None
+
+
+def bone_lengths(positions: np.ndarray) -> np.ndarray:
+    """(F, bones) the limb bones' lengths, NaN where an end is missing."""
+    return np.linalg.norm(positions[:, LIMB_BONES] - positions[:, PARENT_INDEX[list(LIMB_BONES)]], axis=-1)
+
+
+def references(rec: Recording, profile: Profile) -> dict[str, np.ndarray]:
+    """Each method's solve of the complete take: the localization for the thesis's method and the studio
+    options (nothing to fill), the fit calibrated on the complete take for the fit."""
+    pipe = SkeletonPipeline(profile, rec.labels, fill_gaps=False)
+    located = np.concatenate([c.positions for c in pipe.run(rec.positions)])
+    return {"thesis": located, "studio": located, "fit": solve("fit", rec.positions, rec, profile)[0]}
+
+
+def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, np.ndarray],
+             stripped: Profile | None = None):
+    """One row per method: hidden joints' mean / max error (mm) against the method's own solve of the complete
+    take, and against the localization's (``loc_``); bone-length CV (%) and largest deviation from the bone's
+    own median length (%); the fit's marker residual RMS (mm); and the share of hidden frames estimated."""
+    markers = rec.positions.astype(np.float64)
+    col = list(profile.columns(rec.labels))
+    hide = [col.index(x) for x in case.hidden]
+    markers[case.start:, hide] = np.nan
+    rows = []
+    for method in METHODS:
+        prof = stripped if (stripped is not None and method == "studio") else profile
+        pos, residual, _ = solve(method, markers, rec, prof)
+        row = {"case": case.name, "method": method}
+        lengths = bone_lengths(pos)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            med = np.nanmedian(lengths, axis=0)
+            row["bone_cv_pct"] = float(np.nanmean(np.nanstd(lengths, axis=0) / med) * 100)
+            row["bone_dev_max_pct"] = float(np.nanmax(np.abs(lengths / med - 1)) * 100)
+        row["residual_mm"] = float(np.nanmean(residual) * 1000) if residual is not None else float("nan")
+        if case.measured:
+            j = [INDEX[n] for n in case.measured]
+            for prefix, ref in (("", reference[method]), ("loc_", reference["thesis"])):
+                err = np.linalg.norm(pos[case.start:, j] - ref[case.start:, j], axis=-1) * 1000
+                ok = np.isfinite(ref[case.start:, j]).all(axis=-1)
+                row["estimated_pct"] = float(np.isfinite(err[ok]).mean() * 100)
+                row[prefix + "mean_mm"] = float(np.nanmean(err[ok]))
+                row[prefix + "max_mm"] = float(np.nanmax(err[ok]))
+        rows.append(row)
+    return rows

@@ -1,0 +1,29 @@
+"""A whole take through the fit, for offline commands (``mocap solve``, ``mocap calibrate``, ``mocap eval``)."""
+from __future__ import annotations
+
+import numpy as np
+
+from mocap_core.fit.calibration import CalibrationSettings, calibrate
+from mocap_core.fit.fitter import FitSettings, SkeletonFitter
+from mocap_core.fit.subject import Subject
+from mocap_core.pipeline import SolvedChunk
+from mocap_core.profiles import Profile
+
+
+def fit_take(markers: np.ndarray, labels: list[str], profile: Profile, subject: Subject | None = None,
+             settings: FitSettings | None = None, calibration: CalibrationSettings | None = None,
+             progress=None) -> tuple[SolvedChunk, np.ndarray, Subject]:
+    """Fit every frame of ``markers`` (F, M, 3); without a ``subject``, calibrate one from these frames first.
+    Returns the solved frames, each frame's marker residual RMS (metres) and the subject."""
+    if subject is None:
+        subject = calibrate(markers, labels, profile, calibration)
+    fitter = SkeletonFitter(subject, list(profile.columns(labels)), settings)
+    n = len(markers)
+    pos, frames = np.empty((n, len(subject.offsets), 3)), np.empty((n, len(subject.offsets), 3, 3))
+    status, residual = np.empty((n, len(subject.offsets)), np.uint8), np.empty(n)
+    for f in range(n):
+        out = fitter.fit(markers[f])
+        pos[f], frames[f], status[f], residual[f] = out.positions, out.frames, out.status, out.residual_m
+        if progress is not None:
+            progress(1)
+    return SolvedChunk(0, pos, frames, status), residual, subject
