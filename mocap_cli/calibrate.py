@@ -31,7 +31,7 @@ def run(args) -> int:
     if args.seconds:
         rec = rec.slice(0, max(1, int(args.seconds * rec.rate_hz)))
     profile = load_profile(args.profile)
-    subject = calibrate(rec.positions, rec.labels, profile)
+    subject = calibrate(rec.positions, rec.labels, profile, rec.rate_hz)
     subject.save(args.out)
     lengths = subject.lengths()
     named = [f"{j} {lengths[i] * 1000:.0f}" for i, j in enumerate(JOINTS) if subject.known[i] and i > 0]

@@ -72,7 +72,8 @@ def _fitted(args, rec, profile):
         log.info("calibrating the subject from the take (save one with `mocap calibrate` to reuse it)")
     settings = FitSettings(limits=not args.no_constraints)
     with tqdm(total=rec.n_frames, unit="frame", disable=args.quiet, desc=f"fitting {rec.source.split('/')[-1]}") as bar:
-        chunk, _, _ = fit_take(rec.positions, rec.labels, profile, subject, settings, progress=bar.update)
+        chunk, _, _ = fit_take(rec.positions, rec.labels, profile, rec.rate_hz, subject, settings,
+                                progress=bar.update)
     return [chunk]
 
 

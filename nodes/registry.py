@@ -18,6 +18,7 @@ KINDS: dict[str, str] = {
     "hip_interpolation": "nodes.hip_interpolation:HipInterpolation",
     "joint_localization": "nodes.joint_localization:JointLocalization",
     "ik_gapfill": "nodes.ik_gapfill:IkGapfill",
+    "skeleton_fit": "nodes.skeleton_fit:SkeletonFit",
     "retarget": "nodes.retarget:Retarget",
     "vmc_output": "nodes.vmc_output:VmcOutput",
     "bvh_writer": "nodes.bvh_writer:BvhWriterNode",

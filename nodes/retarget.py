@@ -11,7 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import LimbSolution, RigPose, SkeletonFrame
 from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
-from mocap_core.limb_join import LIMBS, FrameJoiner
+from mocap_core.limb_join import LIMBS, FrameJoiner, Joined
 from mocap_core.rig import BONE_JOINT, BONES, local_positions, rig_local_rotations, rig_world_rotations, \
     to_unity_position
 from mocap_core.skeleton import Status
@@ -25,6 +25,9 @@ class Params(BaseModel):
     max_wait_ms: float = Field(20.0, gt=0, description="longest wait for a late limb before it is held")
     up_axis: Literal["x", "y", "z"] = Field("z", description="the source's vertical axis (the profile's up_axis)")
     rig: Literal["unity_humanoid"] = "unity_humanoid"
+    input: Literal["limbs", "whole"] = Field(
+        "limbs", description="limbs: join skeleton/torso and the four skeleton/limb/* topics; whole: take "
+                             "skeleton/fitted, one whole skeleton a frame (the skeleton_fit node)")
 
 
 class Retarget(Node):
@@ -34,6 +37,10 @@ class Retarget(Node):
     publishes = {"skeleton/solved": SkeletonFrame, "rig/pose": RigPose}
     timer_period_s = 0.005
 
+    @classmethod
+    def inputs(cls, params):
+        return {"skeleton/fitted": SkeletonFrame} if params.input == "whole" else cls.subscribes
+
     def setup(self) -> None:
         warm_up()
         self.joiner = FrameJoiner(self.params.max_wait_ms / 1000)
@@ -41,6 +48,9 @@ class Retarget(Node):
 
     def on_message(self, topic, msg) -> None:
         now = time.monotonic()
+        if topic == "skeleton/fitted":  # whole already: nothing to join or wait for
+            self._publish([Joined(msg.header.frame, *from_message(msg), [], msg)])
+            return
         if isinstance(msg, SkeletonFrame):
             joined = self.joiner.add_torso(msg.header.frame, now, *from_message(msg), msg)
         else:

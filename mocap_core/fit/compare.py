@@ -53,7 +53,7 @@ def cases(profile: Profile, labels: list[str], start: int) -> list[Case]:
 def solve(method: str, markers: np.ndarray, rec: Recording, profile: Profile):
     """(positions (F, J, 3), residual RMS per frame or None, subject or None) of one method."""
     if method == "fit":
-        chunk, residual, subject = fit_take(markers, rec.labels, profile)
+        chunk, residual, subject = fit_take(markers, rec.labels, profile, rec.rate_hz)
         return chunk.positions, residual, subject
     pipe = SkeletonPipeline(profile, rec.labels, beyond=method == "studio", rate_hz=rec.rate_hz)
     return np.concatenate([c.positions for c in pipe.run(markers)]), None, None

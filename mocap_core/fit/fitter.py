@@ -26,12 +26,19 @@ from mocap_core.skeleton import N_JOINTS, PARENT_INDEX, Status
 @dataclass
 class FitSettings:
     """Noise scales of the tasks (their weights are 1 / scale^2) and the solve's bounds."""
-    marker_sigma_m: float = 0.01      # how far a seen marker may sit off its calibrated place (skin, noise)
+    min_marker_sigma_m: float = 0.003  # a marker is trusted to sit within its calibrated stray of its place, or this
     robust_m: float = 0.03            # Cauchy scale: a marker this far off counts half, 10x as far 1 %
-    rotation_sigma_rad: float = 0.2   # how far a bone may turn against its parent from one frame to the next
+    turn_scale: float = 1.0           # the motion task expects each bone's calibrated turn rate (RMS) times this
     root_sigma_m: float = 0.05        # how far the root may move from its predicted place in a frame
     keep_turning: float = 0.9         # share of a bone's last turn (in its parent) the motion task expects again
-    posture_sigma_rad: float = 1.0    # how far a bone may turn from its typical rotation in its parent's frame
+    posture_scale: float = 1.0        # and its calibrated stray from its typical rotation (RMS) times this
+    # where the calibration could not measure a bone: its turn rate and its stray
+    default_turn_rad_s: float = 3.0
+    default_posture_rad: float = 0.5
+    min_sigma_rad: float = 0.005
+    stray_weights: bool = True
+    learned_turn: bool = True
+    learned_posture: bool = True
     max_iterations: int = 6
     start_iterations: int = 60        # the first frame (and a re-start) begins from the rest pose
     tolerance: float = 1e-4           # a step smaller than this (radians, metres) ends the solve
@@ -81,7 +88,7 @@ class SkeletonFitter:
     prefixes stripped as the profile says)."""
 
     def __init__(self, subject: Subject, labels: list[str], settings: FitSettings | None = None,
-                 constraints: Constraints | None = None):
+                 constraints: Constraints | None = None, rate_hz: float = 120.0):
         self.subject = subject
         self.settings = s = settings or FitSettings()
         rows = subject.marker_index(labels)
@@ -89,9 +96,18 @@ class SkeletonFitter:
         self.bone[~subject.known[np.maximum(self.bone, 0)]] = -1
         self.offsets_m = np.where(rows[:, None] >= 0, subject.marker_offsets[np.maximum(rows, 0)], 0.0)
         self.limits = constraints or load_constraints()
-        self.weights = np.array([1 / s.marker_sigma_m ** 2, s.robust_m, 1 / s.root_sigma_m ** 2])
-        self.w_rot = np.full(N_JOINTS, 1 / s.rotation_sigma_rad ** 2)
-        self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / s.posture_sigma_rad ** 2, 0.0)
+        stray = np.where(rows >= 0, subject.spread_m[np.maximum(rows, 0)], np.nan)
+        if not s.stray_weights:
+            stray[:] = s.min_marker_sigma_m
+        self.w_marker = 1 / np.maximum(np.nan_to_num(stray, nan=s.min_marker_sigma_m), s.min_marker_sigma_m) ** 2
+        self.weights = np.array([0.0, s.robust_m, 1 / s.root_sigma_m ** 2])
+        turn = np.where(np.isfinite(subject.turn_rad_s) & s.learned_turn, subject.turn_rad_s, s.default_turn_rad_s)
+        posture = np.where(np.isfinite(subject.posture_rad) & s.learned_posture, subject.posture_rad,
+                           s.default_posture_rad)
+        self.w_rot = 1 / np.maximum(turn * s.turn_scale / rate_hz, s.min_sigma_rad) ** 2
+        self.w_rot[0] = 1 / (s.default_turn_rad_s / rate_hz) ** 2  # the root turns in the world
+        self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / np.maximum(posture * s.posture_scale, s.min_sigma_rad) ** 2,
+                               0.0)
         self.root = np.zeros(3)
         self.velocity = np.zeros(3)  # the root's last step: the motion task predicts it goes on
         self.R = np.tile(np.eye(3), (N_JOINTS, 1, 1))
@@ -105,6 +121,11 @@ class SkeletonFitter:
 
     def reset(self) -> None:
         self.started = False
+
+    def take_pose_from(self, other: "SkeletonFitter") -> None:
+        """Go on from another fitter's pose (a subject re-calibrated mid-stream)."""
+        self.root, self.R, self.velocity = other.root.copy(), other.R.copy(), other.velocity.copy()
+        self._L_before, self.started = other._L_before.copy(), other.started
 
     def fit(self, x: np.ndarray) -> FitFrame:
         """One frame's markers (M, 3) metres, NaN where not seen -> the pose."""
@@ -161,7 +182,7 @@ class SkeletonFitter:
         w_rot = self.w_rot * (1e-4 if weak else 1.0)
         w_root = self.weights[2] * (1e-4 if weak else 1.0)
         return fit_pose(self.root, self.R, x, self.bone, self.offsets_m, PARENT_INDEX, self.subject.offsets, SLOT,
-                        CHAINS, ROTATING, root_pred, L_pred, self.weights[0], robust_m or self.weights[1], w_rot, w_root,
+                        CHAINS, ROTATING, root_pred, L_pred, self.w_marker, robust_m or self.weights[1], w_rot, w_root,
                         self.subject.rest, self.w_rest,
                         iterations, s.tolerance,
                         self._P, self._w)

@@ -9,7 +9,8 @@ Each step linearises the markers in small world-frame turns ``d_k`` of each bone
 (a turn of bone k swings everything it carries about ``P[k]``), so a marker's Jacobian block for an
 ancestor k is ``-[m - P[k]]x`` and for the root's position the identity. Tasks, as weighted least
 squares (one system per step, 3 + 3 x bones unknowns):
-- markers: every seen marker on its bone, weight 1 / sigma_m^2 times a Cauchy weight on its
+- markers: every seen marker on its bone, weight 1 / sigma_m^2 (its own stray, from the calibration) times a
+  Cauchy weight on its
   residual (iteratively re-weighted), so one swapped or ghost marker is outvoted, not followed;
 - motion: every bone's local rotation near its prediction, the root near its prediction, which
   settles what no marker sees (a bone with nothing seen keeps its pose relative to its parent);
@@ -157,7 +158,7 @@ def fit_pose(root, R, x, bone, c, parent, offsets, slot, chains, rotating,
             pos = P[b] + mv(R[b], c[m])
             r = x[m] - pos
             e = vnorm(r) / robust_m
-            w = w_marker / (1.0 + e * e)
+            w = w_marker[m] / (1.0 + e * e)
             weights[m] = 1.0 / (1.0 + e * e)
             for i in range(depth):
                 k = chains[b, i]

@@ -10,14 +10,14 @@ from mocap_core.pipeline import SolvedChunk
 from mocap_core.profiles import Profile
 
 
-def fit_take(markers: np.ndarray, labels: list[str], profile: Profile, subject: Subject | None = None,
+def fit_take(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz: float, subject: Subject | None = None,
              settings: FitSettings | None = None, calibration: CalibrationSettings | None = None,
              progress=None) -> tuple[SolvedChunk, np.ndarray, Subject]:
     """Fit every frame of ``markers`` (F, M, 3); without a ``subject``, calibrate one from these frames first.
     Returns the solved frames, each frame's marker residual RMS (metres) and the subject."""
     if subject is None:
-        subject = calibrate(markers, labels, profile, calibration)
-    fitter = SkeletonFitter(subject, list(profile.columns(labels)), settings)
+        subject = calibrate(markers, labels, profile, rate_hz, calibration, settings)
+    fitter = SkeletonFitter(subject, list(profile.columns(labels)), settings, rate_hz=rate_hz)
     n = len(markers)
     pos, frames = np.empty((n, len(subject.offsets), 3)), np.empty((n, len(subject.offsets), 3, 3))
     status, residual = np.empty((n, len(subject.offsets)), np.uint8), np.empty(n)

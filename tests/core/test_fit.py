@@ -28,7 +28,8 @@ def made_up_subject(seed: int = 0) -> Subject:
     labels = [f"M{i}" for i in range(len(bones))]
     marker_offsets = rng.uniform(-0.08, 0.08, (len(bones), 3)) + [0, 0.1, 0]
     return Subject("made_up", offsets, np.ones(N_JOINTS, bool), labels, np.array(bones), marker_offsets,
-                   np.zeros(len(bones)), 100, True, rest=typical_pose())
+                   np.zeros(len(bones)), 100, True, rest=typical_pose(), turn_rad_s=np.full(N_JOINTS, 4.0),
+                   posture_rad=np.full(N_JOINTS, 0.4))  # as calibrating on poses() would find them
 
 
 def typical_pose(seed: int = 1) -> np.ndarray:
@@ -180,7 +181,7 @@ def test_worst_case_on_the_karate_take_keeps_every_bone_rigid():
     markers = rec.positions.astype(float)
     cols = list(profile.columns(rec.labels))
     markers[120:, [cols.index(x) for x in worst.hidden]] = np.nan
-    chunk, residual, subject = fit_take(markers, rec.labels, profile)
+    chunk, residual, subject = fit_take(markers, rec.labels, profile, rec.rate_hz)
     assert np.isfinite(chunk.positions).all() and (chunk.status != Status.MISSING).all()
     lengths = bone_lengths(chunk.positions)
     assert np.abs(lengths / lengths[0] - 1).max() < 0.01

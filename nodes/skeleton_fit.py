@@ -1,0 +1,60 @@
+"""The rigid-skeleton fit as one node: every labelled marker in -> the whole skeleton -> ``skeleton/fitted``.
+
+It takes the place of hip_interpolation, joint_localization and the five ik_gapfill nodes (DESIGN: the studio
+path); retarget with ``input: whole`` turns its output into ``skeleton/solved`` and ``rig/pose``. With
+``subject:`` it fits that calibrated actor from the first frame; without, it calibrates from the stream's first
+seconds (publishing the thesis's localization meanwhile), refines online, and writes ``save_subject`` once the
+calibration has converged.
+"""
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import MarkerFrame, SkeletonFrame
+from mocap_core.fit.fitter import FitSettings
+from mocap_core.fit.live import LiveFit, LiveSettings
+from mocap_core.fit.subject import load_subject
+from mocap_core.profiles import load_profile
+from mocap_core.warmup import warm_up
+from nodes.runtime import Node
+from nodes.skeleton_codec import to_message
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    profile: str = Field(description="marker-set profile (seeds the calibration's bone frames)")
+    subject: str | None = Field(None, description="subject file from `mocap calibrate`; none: calibrate live")
+    save_subject: str | None = Field(None, description="write the live calibration here once it has converged")
+    first_calibration_s: float = Field(2.0, gt=0, description="seconds of stream before the first calibration")
+    limits: bool = Field(True, description="the thesis's cone and twist limits on what the motion task predicts")
+
+
+class SkeletonFit(Node):
+    kind = "skeleton_fit"
+    Params = Params
+    subscribes = {"markers/raw": MarkerFrame}
+    publishes = {"skeleton/fitted": SkeletonFrame}
+
+    def setup(self) -> None:
+        warm_up()
+        self.profile = load_profile(self.params.profile)
+        self.subject = load_subject(self.params.subject) if self.params.subject else None
+        self.live: LiveFit | None = None
+        self.labels: list[str] = []
+        self.saved = False
+
+    def on_message(self, topic, msg: MarkerFrame) -> None:
+        if self.live is None or msg.labels != self.labels:  # the first frame, or a new marker set
+            self.labels = list(msg.labels)
+            self.live = LiveFit(self.profile, self.labels, self.subject, FitSettings(limits=self.params.limits),
+                                LiveSettings(first_s=self.params.first_calibration_s))
+        calibrations = self.live.calibrations
+        out = self.live.add(msg.positions.astype(float), msg.header.capture_time_s)
+        if self.live.calibrations != calibrations:
+            self.log.info("calibrated the subject (%d frames)%s", self.live.subject.frames,
+                          ", converged" if self.live.converged else "")
+            if self.live.converged and self.params.save_subject and not self.saved:
+                self.live.subject.save(self.params.save_subject)
+                self.saved = True
+                self.log.info("subject written to %s", self.params.save_subject)
+        self.ctx.publish("skeleton/fitted", to_message(out.positions, out.frames, out.status), source=msg)
