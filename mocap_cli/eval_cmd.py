@@ -136,6 +136,9 @@ def add_parser(sub) -> None:
     tg.add_argument("--no-plots", action="store_true")
     tg.set_defaults(func=run_targets)
 
+    from mocap_cli import rigid_eval
+    rigid_eval.register(esub)
+
 
 def run_timing(args) -> int:
     rec = read_recording(args.take)

@@ -130,7 +130,10 @@ class LimbFiller:
         # noise, and the stretch of a limb that straightened past its reach, then last the whole gap
         # (dance set walk2, left elbow hidden from 1 s: 23 -> 20 mm).
         self.learned_lengths = learned_lengths
-        self.lengths = np.zeros((n, 2))
+        self.lengths = np.zeros((n, 2))  # learned always: the IK chains keep them (the thesis's rigid bones)
+        self.no_lengths = np.zeros((n, 2))
+        self.seen = np.zeros(n, bool)    # joints located at least once
+        self.chain_end = n               # the limb's joints up to its last one ever located
         other = MIRRORED.get(limb)  # the other limb's chain, whose poses both memories learn too, mirrored
         other_idx = None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]], dtype=np.int64)
         self.memory = LimbMemory(n, other_idx) if limb_memory else None
@@ -172,10 +175,9 @@ class LimbFiller:
         if self.carried is not None and self.has_prev[0]:
             out[0] += af.segment_carry(positions, frames, status, idx, self.carried, prev_pos, prev_frames)
             out[1] += af.carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames)
+        af.learn_lengths(positions, status, idx, self.lengths)
         if self.swivel:
             af.learn_directions(positions, frames, status, idx, self.dir_sum, self.dir_sq, self.dir_n)
-            if self.learned_lengths:
-                af.learn_lengths(positions, status, idx, self.lengths)
             recalled = self.no_recall
             if self.memory is not None:
                 self.memory.learn(positions, frames, status, idx, self.parent_of_root)
@@ -185,13 +187,22 @@ class LimbFiller:
             if self.has_prev[0]:
                 out[0] += af.swivel_fill(positions, frames, status, idx, self.parent_of_root, prev_pos, prev_frames,
                                          self.prev_parent_frame, self.bend, self.bend_ok, self.dir_sum,
-                                         self.dir_sq, self.dir_n, recalled, self.lengths, self.modelled,
+                                         self.dir_sq, self.dir_n, recalled,
+                                         self.lengths if self.learned_lengths else self.no_lengths, self.modelled,
                                          self.model_weight)
         p = self.params
-        _fill_limb(positions, frames, status, self.joints, self.parent_of_root, self.limb.endswith("arm"),
-                   self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, *self._limits_of,
-                   self.solver.kernel_id, p.constraints, p.max_iterations, p.stop_distance_m, p.escape_step_deg,
-                   p.escape_max_deg, out)
+        # a limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
+        # wrist (the hand, never seen, would keep the limb from ever being whole, and so from ever being filled)
+        self.seen |= status[idx] == af.LOCATED
+        n = int(np.flatnonzero(self.seen)[-1]) + 1 if self.seen.any() else len(idx)
+        if n != self.chain_end:  # a joint seen for the first time: the limb is whole again only once it is seen
+            self.chain_end, self.has_prev[0] = n, False
+        _fill_limb(positions, frames, status, idx[:n], self.parent_of_root, self.limb.endswith("arm"),
+                   self.prev_pos[:n], self.prev_frames[:n], self.prev_parent_frame, self.has_prev, self.lengths,
+                   *(a[:n] for a in self._limits_of), self.solver.kernel_id, p.constraints, p.max_iterations,
+                   p.stop_distance_m, p.escape_step_deg, p.escape_max_deg, out)
+        never = idx[n:]  # joints never located (the carries would hold them from nothing)
+        positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
         if self.blend.on:
             self.blend.blend(positions, status, idx, frames)
         took_us = (time.perf_counter() - t0) * 1e6
@@ -241,9 +252,22 @@ class LimbFiller:
 
 
 @njit(cache=True)
+def _rigid_chain(prev_pos, lengths, root, m):
+    """The previous chain's joints root..root+m with each bone turned as it was and as long as learned."""
+    P = np.empty((m + 1, 3))
+    P[0] = prev_pos[root]
+    for k in range(1, m + 1):
+        bone = prev_pos[root + k] - prev_pos[root + k - 1]
+        size = np.sqrt(np.sum(bone * bone))
+        length = af._length(lengths, root + k - 1, size)
+        P[k] = P[k - 1] + (bone * (length / size) if size > 0 else bone)
+    return P
+
+
+@njit(cache=True)
 def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_frames, prev_parent, has_prev,
-               pp, cones, has_cone, twists, has_twist, solver, constrained, max_iter, stop_m, esc_step, esc_max,
-               out):
+               lengths, pp, cones, has_cone, twists, has_twist, solver, constrained, max_iter, stop_m, esc_step,
+               esc_max, out):
     """Algorithm 1 for one limb, in place. out = [estimated, held, iterations, max residual m]."""
     n = idx.shape[0]
     parent_frame = frames[parent].copy()
@@ -263,10 +287,13 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
                 t += 1
             last = t if t < n else n - 1
             m = last - root  # bones in the chain
-            # the previous chain from root to target (or to the limb's end), moved onto the current root
+            # the previous chain from root to target (or to the limb's end), moved onto the current root, each
+            # bone at its learned length: the chain's last bone would otherwise carry each frame's residual
+            # into the next frame's start, and stretch frame after frame
+            prev = _rigid_chain(prev_pos, lengths, root, m)
             P = np.empty((m + 1, 3))
             for k in range(m + 1):
-                P[k] = prev_pos[root + k] - prev_pos[root] + positions[idx[root]]
+                P[k] = prev[k] - prev[0] + positions[idx[root]]
             R = prev_frames[root:last].copy()
             ref0 = parent_frame if root == 0 else frames[idx[root - 1]].copy()
             if not all_finite(ref0):
@@ -278,12 +305,19 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
                                 esc_max)
                 out[2] += it
                 out[3] = max(out[3], res)
-                first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position
+                first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position, if reached
+                if res > stop_m:
+                    # out of the rigid chain's reach: the target and the joints after it hang at the chain's end,
+                    # as they are, so no bone stretches (the thesis's C# code keeps every bone's length too)
+                    shift = P[m] - target
+                    for k in range(t, n):
+                        positions[idx[k]] = positions[idx[k]] + shift
+                    status[idx[t]] = ESTIMATED
             else:
                 # no target: keep the last rotation relative to the parent (a rigid carry)
                 turn = mm(parent_frame, prev_parent.T.copy())
                 for k in range(m + 1):
-                    P[k] = positions[idx[root]] + mv(turn, prev_pos[root + k] - prev_pos[root])
+                    P[k] = positions[idx[root]] + mv(turn, prev[k] - prev[0])
                 for k in range(m):
                     R[k] = mm(turn, prev_frames[root + k])
                 frames[idx[last]] = mm(turn, prev_frames[last])

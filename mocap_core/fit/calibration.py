@@ -44,17 +44,14 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz:
     ``fit_settings``: the fit's (FitSettings) that the refinement rounds use."""
     s = settings or CalibrationSettings()
     markers = np.asarray(markers, np.float64)
-    times = np.arange(len(markers)) / rate_hz
     if len(markers) > s.max_frames:
-        keep = np.linspace(0, len(markers) - 1, s.max_frames).round().astype(int)
-        markers, times = markers[keep], times[keep]
+        markers = markers[np.linspace(0, len(markers) - 1, s.max_frames).round().astype(int)]
     landmark_map = profile.resolve(labels)
     loc = Localizer(profile.body).localize(landmark_map.apply(markers))
     offsets, known, rest = joint_offsets(loc.positions, loc.frames, s)
-    turn, posture = joint_motion(loc.frames, rest, times)
     bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s)
     clean = list(profile.columns(labels))
-    subject = Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest, turn, posture)
+    subject = Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest)
     for _ in range(s.refinements):
         subject = refine(subject, markers, clean, rate_hz, s, fit_settings)
     return subject
@@ -87,30 +84,6 @@ def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
                     offsets[left] *= mean / a
                     offsets[right] *= mean / b
     return offsets, known, rest
-
-
-def joint_motion(R: np.ndarray, rest: np.ndarray, times: np.ndarray):
-    """How fast each bone turns in its parent's frame (RMS, rad/s, between consecutive frames where both are
-    located) and how far it strays from its typical rotation (RMS, rad): the fit's motion and posture tasks
-    expect what this subject did. NaN where a bone was not located in enough frames."""
-    n = R.shape[1]
-    turn, posture = np.full(n, np.nan), np.full(n, np.nan)
-    for j in range(1, n):
-        L = np.einsum("fba,fbc->fac", R[:, PARENT_INDEX[j]], R[:, j])
-        ok = np.isfinite(L).all(axis=(1, 2))
-        if ok.sum() < 2:
-            continue
-        posture[j] = np.sqrt(np.mean(_angle(np.einsum("ba,fbc->fac", rest[j], L[ok])) ** 2))
-        pair = ok[1:] & ok[:-1]
-        if pair.any():
-            step = _angle(np.einsum("fba,fbc->fac", L[:-1][pair], L[1:][pair])) / np.diff(times)[pair]
-            turn[j] = np.sqrt(np.mean(step ** 2))
-    return turn, posture
-
-
-def _angle(R: np.ndarray) -> np.ndarray:
-    """(F, 3, 3) rotations -> their angles (radians)."""
-    return np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0))
 
 
 def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.ndarray, s: CalibrationSettings):

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mocap_core.experiments import real_gap_moves
 from mocap_core.fit.take import fit_take
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import Profile
@@ -17,6 +18,8 @@ from mocap_core.recordings import Recording
 from mocap_core.skeleton import INDEX, PARENT_INDEX
 
 METHODS = ("thesis", "studio", "fit")
+# The studio options lean on the profile's ``tracking:`` markers; the fit finds every marker's bone by itself.
+NO_TRACKING = "studio_no_tracking"
 # What the thesis's worst case keeps (thesis 4.3): the pelvis, head, hand and toe markers.
 WORST_CASE_LANDMARKS = ("SACR", "L_IAS", "R_IAS", "SGL", "L_HEAD", "R_HEAD", "L_HM2", "R_HM2", "L_FM2", "R_FM2")
 HIDE_LANDMARKS = {"elbow": ("HLE", "HME"), "knee_ankle": ("FLE", "FME", "TTC", "FAL", "TAM")}
@@ -51,12 +54,15 @@ def cases(profile: Profile, labels: list[str], start: int) -> list[Case]:
 
 
 def solve(method: str, markers: np.ndarray, rec: Recording, profile: Profile):
-    """(positions (F, J, 3), residual RMS per frame or None, subject or None) of one method."""
+    """(positions (F, J, 3), status (F, J), residual RMS per frame or None) of one method."""
     if method == "fit":
-        chunk, residual, subject = fit_take(markers, rec.labels, profile, rec.rate_hz)
-        return chunk.positions, residual, subject
+        chunk, residual, _ = fit_take(markers, rec.labels, profile, rec.rate_hz)
+        return chunk.positions, chunk.status, residual
+    if method == NO_TRACKING:
+        method, profile = "studio", profile.model_copy(update={"tracking": {}})
     pipe = SkeletonPipeline(profile, rec.labels, beyond=method == "studio", rate_hz=rec.rate_hz)
-    return np.concatenate([c.positions for c in pipe.run(markers)]), None, None
+    chunks = list(pipe.run(markers))
+    return np.concatenate([c.positions for c in chunks]), np.concatenate([c.status for c in chunks]), None
 
 
 def bone_lengths(positions: np.ndarray) -> np.ndarray:
@@ -69,11 +75,11 @@ def references(rec: Recording, profile: Profile) -> dict[str, np.ndarray]:
     options (nothing to fill), the fit calibrated on the complete take for the fit."""
     pipe = SkeletonPipeline(profile, rec.labels, fill_gaps=False)
     located = np.concatenate([c.positions for c in pipe.run(rec.positions)])
-    return {"thesis": located, "studio": located, "fit": solve("fit", rec.positions, rec, profile)[0]}
+    return {"thesis": located, "studio": located, NO_TRACKING: located,
+            "fit": solve("fit", rec.positions, rec, profile)[0]}
 
 
-def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, np.ndarray],
-             stripped: Profile | None = None):
+def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, np.ndarray]):
     """One row per method: hidden joints' mean / max error (mm) against the method's own solve of the complete
     take, and against the localization's (``loc_``); bone-length CV (%) and largest deviation from the bone's
     own median length (%); the fit's marker residual RMS (mm); and the share of hidden frames estimated."""
@@ -82,9 +88,9 @@ def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, 
     hide = [col.index(x) for x in case.hidden]
     markers[case.start:, hide] = np.nan
     rows = []
-    for method in METHODS:
-        prof = stripped if (stripped is not None and method == "studio") else profile
-        pos, residual, _ = solve(method, markers, rec, prof)
+    methods = METHODS + ((NO_TRACKING,) if case.name.startswith("elbow") and profile.tracking else ())
+    for method in methods:
+        pos, status, residual = solve(method, markers, rec, profile)
         row = {"case": case.name, "method": method}
         lengths = bone_lengths(pos)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -100,5 +106,10 @@ def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, 
                 row["estimated_pct"] = float(np.isfinite(err[ok]).mean() * 100)
                 row[prefix + "mean_mm"] = float(np.nanmean(err[ok]))
                 row[prefix + "max_mm"] = float(np.nanmax(err[ok]))
+        if not case.hidden:  # the take's own gaps: a whole skeleton every frame, and no twitch where they begin or end
+            known = np.isfinite(reference[method]).all(axis=2).any(axis=0)
+            row["complete_pct"] = float(np.isfinite(pos[:, known]).all(axis=2).all(axis=1).mean() * 100)
+            moves = real_gap_moves(pos, status).row()
+            row["changes_over_1_5"], row["changes_max"] = moves["paced_over_1_5"], moves["paced_max"]
         rows.append(row)
     return rows

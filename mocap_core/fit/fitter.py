@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocap_core.fit.calibration import ROTATING
-from mocap_core.fit.kernel import fit_pose, forward, limit_locals, predict_locals
+from mocap_core.fit.kernel import fit_pose, forward, limit_locals
 from mocap_core.fit.subject import Subject
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.skeleton import N_JOINTS, PARENT_INDEX, Status
@@ -26,19 +26,11 @@ from mocap_core.skeleton import N_JOINTS, PARENT_INDEX, Status
 @dataclass
 class FitSettings:
     """Noise scales of the tasks (their weights are 1 / scale^2) and the solve's bounds."""
-    min_marker_sigma_m: float = 0.003  # a marker is trusted to sit within its calibrated stray of its place, or this
+    marker_sigma_m: float = 0.01      # how far a seen marker may sit off its calibrated place (skin, noise)
     robust_m: float = 0.03            # Cauchy scale: a marker this far off counts half, 10x as far 1 %
-    turn_scale: float = 1.0           # the motion task expects each bone's calibrated turn rate (RMS) times this
+    turn_rad_s: float = 24.0          # how fast a bone may turn against its parent, unseen (the motion task)
     root_sigma_m: float = 0.05        # how far the root may move from its predicted place in a frame
-    keep_turning: float = 0.9         # share of a bone's last turn (in its parent) the motion task expects again
-    posture_scale: float = 1.0        # and its calibrated stray from its typical rotation (RMS) times this
-    # where the calibration could not measure a bone: its turn rate and its stray
-    default_turn_rad_s: float = 3.0
-    default_posture_rad: float = 0.5
-    min_sigma_rad: float = 0.005
-    stray_weights: bool = True
-    learned_turn: bool = True
-    learned_posture: bool = True
+    posture_rad: float = 1.0          # how far a bone may turn from its typical rotation in its parent's frame
     max_iterations: int = 6
     start_iterations: int = 60        # the first frame (and a re-start) begins from the rest pose
     tolerance: float = 1e-4           # a step smaller than this (radians, metres) ends the solve
@@ -96,18 +88,10 @@ class SkeletonFitter:
         self.bone[~subject.known[np.maximum(self.bone, 0)]] = -1
         self.offsets_m = np.where(rows[:, None] >= 0, subject.marker_offsets[np.maximum(rows, 0)], 0.0)
         self.limits = constraints or load_constraints()
-        stray = np.where(rows >= 0, subject.spread_m[np.maximum(rows, 0)], np.nan)
-        if not s.stray_weights:
-            stray[:] = s.min_marker_sigma_m
-        self.w_marker = 1 / np.maximum(np.nan_to_num(stray, nan=s.min_marker_sigma_m), s.min_marker_sigma_m) ** 2
+        self.w_marker = np.full(len(labels), 1 / s.marker_sigma_m ** 2)
         self.weights = np.array([0.0, s.robust_m, 1 / s.root_sigma_m ** 2])
-        turn = np.where(np.isfinite(subject.turn_rad_s) & s.learned_turn, subject.turn_rad_s, s.default_turn_rad_s)
-        posture = np.where(np.isfinite(subject.posture_rad) & s.learned_posture, subject.posture_rad,
-                           s.default_posture_rad)
-        self.w_rot = 1 / np.maximum(turn * s.turn_scale / rate_hz, s.min_sigma_rad) ** 2
-        self.w_rot[0] = 1 / (s.default_turn_rad_s / rate_hz) ** 2  # the root turns in the world
-        self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / np.maximum(posture * s.posture_scale, s.min_sigma_rad) ** 2,
-                               0.0)
+        self.w_rot = np.full(N_JOINTS, 1 / (s.turn_rad_s / rate_hz) ** 2)
+        self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / s.posture_rad ** 2, 0.0)
         self.root = np.zeros(3)
         self.velocity = np.zeros(3)  # the root's last step: the motion task predicts it goes on
         self.R = np.tile(np.eye(3), (N_JOINTS, 1, 1))
@@ -125,7 +109,7 @@ class SkeletonFitter:
     def take_pose_from(self, other: "SkeletonFitter") -> None:
         """Go on from another fitter's pose (a subject re-calibrated mid-stream)."""
         self.root, self.R, self.velocity = other.root.copy(), other.R.copy(), other.velocity.copy()
-        self._L_before, self.started = other._L_before.copy(), other.started
+        self.started = other.started
 
     def fit(self, x: np.ndarray) -> FitFrame:
         """One frame's markers (M, 3) metres, NaN where not seen -> the pose."""
@@ -133,10 +117,7 @@ class SkeletonFitter:
         if not self.started and not self._start(x):
             return self._missing()
         s = self.settings
-        L = self._locals()
-        L_pred = np.empty_like(L)
-        predict_locals(L, self._L_before, s.keep_turning, L_pred)
-        self._L_before = L
+        L_pred = self._locals()  # each bone held as it was against its parent
         if s.limits:
             c = self.limits
             limit_locals(L_pred, c.pp, c.cones, c.has_cone, c.twists, c.has_twist)
@@ -166,7 +147,6 @@ class SkeletonFitter:
         self._solve(x, self.root.copy(), self._locals(), self.settings.start_iterations, weak=True, robust_m=1.0)
         self._solve(x, self.root.copy(), self._locals(), self.settings.start_iterations, weak=True)
         self.velocity = np.zeros(3)
-        self._L_before = self._locals()
         self.started = True
         return True
 

@@ -9,8 +9,7 @@ Each step linearises the markers in small world-frame turns ``d_k`` of each bone
 (a turn of bone k swings everything it carries about ``P[k]``), so a marker's Jacobian block for an
 ancestor k is ``-[m - P[k]]x`` and for the root's position the identity. Tasks, as weighted least
 squares (one system per step, 3 + 3 x bones unknowns):
-- markers: every seen marker on its bone, weight 1 / sigma_m^2 (its own stray, from the calibration) times a
-  Cauchy weight on its
+- markers: every seen marker on its bone, weight 1 / sigma_m^2 times a Cauchy weight on its
   residual (iteratively re-weighted), so one swapped or ghost marker is outvoted, not followed;
 - motion: every bone's local rotation near its prediction, the root near its prediction, which
   settles what no marker sees (a bone with nothing seen keeps its pose relative to its parent);
@@ -66,15 +65,6 @@ def _limit(R, p, pp, cone, has_cone, twist, has_twist):
             y = R[:, 1].copy()
             R = mm(axis_angle(y / vnorm(y), target - alpha), R)
     return R
-
-
-@njit(cache=True)
-def predict_locals(L, L_before, keep, out):
-    """Each bone's next local rotation (J, 3, 3) if it goes on turning as it did over the last frame, that turn
-    scaled by ``keep`` (so a bone that nothing sees comes to rest against its parent)."""
-    for k in range(L.shape[0]):
-        step = rotation_vector(mm(L[k], L_before[k].T))
-        out[k] = mm(expm(keep * step), L[k])
 
 
 @njit(cache=True)

@@ -12,8 +12,7 @@ frames: 3000              # frames the calibration learned from
 converged: true
 bones:                    # joint: its parent and its offset in the parent's frame (metres)
   spine0: {parent: pelvis, offset: [0.0, 0.02, 0.08], length_m: 0.0825,
-           rest: [0.1, 0.0, 0.0],            # its typical rotation in the parent's frame (rotation vector)
-           turn_deg_s: 40.0, posture_deg: 6.0}  # how fast it turns there, how far from rest (RMS)
+           rest: [0.1, 0.0, 0.0]}    # its typical rotation in the parent's frame (a rotation vector)
 markers:                  # label: its bone, its offset in that bone's frame, its spread there (mm)
   LELB: {bone: shoulder_l, offset: [0.03, 0.28, -0.01], spread_mm: 4.1}
 unassigned: [StartG]      # labels that moved with no bone (props, the floor)
@@ -47,18 +46,11 @@ class Subject:
     spread_m: np.ndarray         # (M,) how far the marker strayed from its offset while calibrating (robust)
     frames: int = 0
     converged: bool = False
-    rest: np.ndarray = field(default=None)     # (J, 3, 3) each bone's typical rotation in its parent's frame
-    turn_rad_s: np.ndarray = field(default=None)  # (J,) how fast each bone turns there (RMS; NaN = unknown)
-    posture_rad: np.ndarray = field(default=None)  # (J,) how far it strays from its typical rotation (RMS)
+    rest: np.ndarray = field(default=None)  # (J, 3, 3) each bone's typical rotation in its parent's frame
 
     def __post_init__(self):
-        n = len(JOINTS)
         if self.rest is None:
-            self.rest = np.tile(np.eye(3), (n, 1, 1))
-        if self.turn_rad_s is None:
-            self.turn_rad_s = np.full(n, np.nan)
-        if self.posture_rad is None:
-            self.posture_rad = np.full(n, np.nan)
+            self.rest = np.tile(np.eye(3), (len(JOINTS), 1, 1))
 
     def lengths(self) -> np.ndarray:
         """(J,) each joint's distance from its parent (the bone's length; 0 for the root)."""
@@ -76,8 +68,7 @@ class Subject:
                 continue
             bones[name] = {"parent": PARENT[name], "offset": _round(self.offsets[j]),
                            "length_m": round(float(np.linalg.norm(self.offsets[j])), 5),
-                           "rest": _round(rotation_vector_np(self.rest[j])),
-                           "turn_deg_s": _deg(self.turn_rad_s[j]), "posture_deg": _deg(self.posture_rad[j])}
+                           "rest": _round(rotation_vector_np(self.rest[j]))}
         markers = {label: {"bone": JOINTS[b], "offset": _round(self.marker_offsets[i]),
                            "spread_mm": round(float(self.spread_m[i] * 1000), 1)}
                    for i, (label, b) in enumerate(zip(self.labels, self.marker_bone)) if b >= 0}
@@ -85,14 +76,6 @@ class Subject:
                "bones": bones, "markers": markers,
                "unassigned": [label for label, b in zip(self.labels, self.marker_bone) if b < 0]}
         Path(path).write_text(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=110))
-
-
-def _deg(x: float) -> float | None:
-    return round(float(np.degrees(x)), 2) if np.isfinite(x) else None
-
-
-def _rad(x) -> float:
-    return np.nan if x is None else np.radians(float(x))
 
 
 def _round(v) -> list[float]:
@@ -118,7 +101,6 @@ def load_subject(path: str | Path) -> Subject:
     from scipy.spatial.transform import Rotation
     n = len(JOINTS)
     offsets, known, rest = np.zeros((n, 3)), np.zeros(n, bool), np.tile(np.eye(3), (n, 1, 1))
-    turn, posture = np.full(n, np.nan), np.full(n, np.nan)
     known[0] = True
     try:
         for name, bone in (doc.get("bones") or {}).items():
@@ -127,7 +109,6 @@ def load_subject(path: str | Path) -> Subject:
             j = INDEX[name]
             offsets[j] = np.asarray(bone["offset"], float).reshape(3)
             rest[j] = Rotation.from_rotvec(np.asarray(bone.get("rest", [0, 0, 0]), float)).as_matrix()
-            turn[j], posture[j] = _rad(bone.get("turn_deg_s")), _rad(bone.get("posture_deg"))
             known[j] = True
         labels, bones, marker_offsets, spread = [], [], [], []
         for label, m in (doc.get("markers") or {}).items():
@@ -148,4 +129,4 @@ def load_subject(path: str | Path) -> Subject:
         raise SubjectError(f"subject file {path}: needs finite bone offsets and at least one marker")
     return Subject(str(doc.get("profile", "")), offsets, known, labels, np.array(bones, np.int64),
                    np.array(marker_offsets).reshape(-1, 3), np.array(spread), int(doc.get("frames", 0)),
-                   bool(doc.get("converged", False)), rest, turn, posture)
+                   bool(doc.get("converged", False)), rest)

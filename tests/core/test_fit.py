@@ -28,8 +28,7 @@ def made_up_subject(seed: int = 0) -> Subject:
     labels = [f"M{i}" for i in range(len(bones))]
     marker_offsets = rng.uniform(-0.08, 0.08, (len(bones), 3)) + [0, 0.1, 0]
     return Subject("made_up", offsets, np.ones(N_JOINTS, bool), labels, np.array(bones), marker_offsets,
-                   np.zeros(len(bones)), 100, True, rest=typical_pose(), turn_rad_s=np.full(N_JOINTS, 4.0),
-                   posture_rad=np.full(N_JOINTS, 0.4))  # as calibrating on poses() would find them
+                   np.zeros(len(bones)), 100, True, rest=typical_pose())
 
 
 def typical_pose(seed: int = 1) -> np.ndarray:

@@ -34,9 +34,10 @@ def test_localization_and_gap_filling_against_the_truth():
         assert np.nanmax(e) < limit, (joint, np.nanmax(e))
     # the knee regression of the thesis lands within its published 23-37 mm (plus noise)
     assert np.nanmean(err(loc.positions, "knee_l")) < 0.045
-    # with IK, every joint of every frame after the first whole one is there; the thesis's method
-    # drifts on this take (the wrist stays within the 1 cm stop distance frame to frame, so the chain
-    # is only moved, never re-solved), the swivel option stays with the truth
+    # with IK, every joint of every frame after the first whole one is there; the thesis's method keeps
+    # its chains' bones at their learned lengths, so it no longer drifts on this take (the wrist stays within
+    # the 1 cm stop distance frame to frame, so the chain is only moved, never re-solved), and neither does
+    # the swivel option
     errors = {}
     for swivel in (False, True):
         solved = SkeletonPipeline(prof, rec.labels)
@@ -48,4 +49,4 @@ def test_localization_and_gap_filling_against_the_truth():
         assert estimated.sum() > 20
         errors[swivel] = err(out.positions, "elbow_l")[estimated]
     assert np.median(errors[True]) < 0.03 and errors[True].max() < 0.05
-    assert np.median(errors[False]) > 2 * np.median(errors[True])
+    assert np.median(errors[False]) < 0.02 and errors[False].max() < 0.05
