@@ -42,6 +42,21 @@ def forward(root, R, parent, offsets, P):
 
 
 @njit(cache=True)
+def logm(R):
+    """The rotation vector of R (the inverse of expm), without temporaries; near a half turn through the
+    quaternion (mocap_core.ik.kernels.rotation_vector), where the antisymmetric part fades."""
+    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    w0, w1, w2 = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
+    if c > 1.0 - 1e-12:
+        return np.array([0.5 * w0, 0.5 * w1, 0.5 * w2])
+    if c < -0.99:
+        return rotation_vector(R)
+    angle = math.acos(c)
+    k = angle / (2.0 * math.sin(angle))
+    return np.array([k * w0, k * w1, k * w2])
+
+
+@njit(cache=True)
 def expm(v):
     angle = vnorm(v)
     if angle < 1e-15:
@@ -90,7 +105,8 @@ def _orthonormal(R):
 
 @njit(cache=True)
 def _accumulate(H, g, slot, chain, a, r, w):
-    """Add one marker's residual r (weight w, position a on the body) to the normal equations."""
+    """Add one marker's residual r (weight w, position a[i] from each ancestor's joint) to the normal equations:
+    the lower triangle only (row: the deeper unknown), which is all the tree solve reads."""
     for i in range(3):
         H[i, i] += w
         g[i] += w * r[i]
@@ -100,18 +116,18 @@ def _accumulate(H, g, slot, chain, a, r, w):
             break
         sa = slot[ka]
         va = a[ia]
-        # root-rotation cross terms: w * J_a with J_a = -[va]x
-        H[0, sa + 1] += w * va[2]
-        H[0, sa + 2] -= w * va[1]
-        H[1, sa + 0] -= w * va[2]
-        H[1, sa + 2] += w * va[0]
-        H[2, sa + 0] += w * va[1]
-        H[2, sa + 1] -= w * va[0]
+        # against the root's position: w * J_a^T with J_a = -[va]x, so J_a^T = [va]x
+        H[sa + 0, 1] -= w * va[2]
+        H[sa + 0, 2] += w * va[1]
+        H[sa + 1, 0] += w * va[2]
+        H[sa + 1, 2] -= w * va[0]
+        H[sa + 2, 0] -= w * va[1]
+        H[sa + 2, 1] += w * va[0]
         # g_a += w * va x r
         g[sa + 0] += w * (va[1] * r[2] - va[2] * r[1])
         g[sa + 1] += w * (va[2] * r[0] - va[0] * r[2])
         g[sa + 2] += w * (va[0] * r[1] - va[1] * r[0])
-        for ib in range(chain.shape[0]):
+        for ib in range(ia, chain.shape[0]):  # itself and its ancestors
             kb = chain[ib]
             if kb < 0:
                 break
@@ -124,7 +140,38 @@ def _accumulate(H, g, slot, chain, a, r, w):
 
 
 @njit(cache=True)
-def fit_pose(root, R, x, bone, c, parent, offsets, slot, chains, rotating,
+def tree_solve(H, g, up):
+    """Solve H x = g where H is nonzero only between an unknown and those above it in a tree (``up``: each
+    unknown's parent, -1 at the top; parents first), from H's lower triangle, in place of g: Featherstone's
+    LTDL factorisation, which exploits that sparsity (no fill-in; Rigid Body Dynamics Algorithms, 6.5)."""
+    n = g.shape[0]
+    for k in range(n - 1, -1, -1):
+        i = up[k]
+        while i >= 0:
+            a = H[k, i] / H[k, k]
+            j = i
+            while j >= 0:
+                H[i, j] -= a * H[k, j]
+                j = up[j]
+            H[k, i] = a
+            i = up[i]
+    for i in range(n - 1, -1, -1):
+        j = up[i]
+        while j >= 0:
+            g[j] -= H[i, j] * g[i]
+            j = up[j]
+    for i in range(n):
+        g[i] /= H[i, i]
+    for i in range(n):
+        j = up[i]
+        while j >= 0:
+            g[i] -= H[i, j] * g[j]
+            j = up[j]
+    return g
+
+
+@njit(cache=True)
+def fit_pose(root, R, x, bone, c, parent, offsets, slot, up, chains, rotating,
              root_pred, L_pred, w_marker, robust_m, w_rot, w_root, L_rest, w_rest,
              max_iterations, tolerance, P, weights):
     """One frame's fit, in place on ``root`` (3,) and ``R`` (J, 3, 3); ``P`` gets the joints, ``weights`` (M,)
@@ -167,17 +214,13 @@ def fit_pose(root, R, x, bone, c, parent, offsets, slot, chains, rotating,
             p = parent[k]
             for target, w in ((L_pred[k], w_rot[k]), (L_rest[k], w_rest[k])):
                 if p < 0:
-                    t = rotation_vector(mm(target, R[k].T))
+                    t = logm(mm(target, R[k].T))
                 else:
-                    t = mv(R[p], rotation_vector(mm(target, mm(R[p].T, R[k]).T)))
+                    t = mv(R[p], logm(mm(target, mm(R[p].T, R[k]).T)))
                 for i in range(3):
                     H[s + i, s + i] += w
                     g[s + i] += w * t[i]
-        # H is symmetric: fill the lower triangle's root-rotation terms from the upper
-        for i in range(3):
-            for j in range(3, n):
-                H[j, i] = H[i, j]
-        d = np.linalg.solve(H, g)
+        d = tree_solve(H, g, up)
         root += d[:3]
         old = R.copy()
         for k in range(J):

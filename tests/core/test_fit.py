@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from scipy.spatial.transform import Rotation
 
 from mocap_core.fit.calibration import CalibrationSettings, ROTATING, calibrate, joint_offsets, marker_offsets
@@ -12,7 +13,8 @@ from mocap_core.fit.fitter import FitSettings, SkeletonFitter
 from mocap_core.fit.kernel import forward
 from mocap_core.fit.subject import Subject, SubjectError, load_subject
 from mocap_core.fit.take import fit_take
-from mocap_core.profiles import load_profile
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.profiles import PROFILE_DIR, load_profile
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import INDEX, JOINTS, N_JOINTS, PARENT_INDEX, Status
 from tests.conftest import DATA
@@ -187,3 +189,30 @@ def test_worst_case_on_the_karate_take_keeps_every_bone_rigid():
     assert chunk.status[200, INDEX["elbow_l"]] == Status.ESTIMATED
     assert chunk.status[200, INDEX["hand_l"]] == Status.LOCATED
     assert np.nanmean(residual[120:]) < 0.01  # the kept markers are met
+
+
+def test_a_marker_set_without_hand_markers_still_gets_its_arms_filled(tmp_path):
+    """The Qualisys walk with its profile stripped of the hand markers and of ``tracking:``, both elbows hidden from
+    0.5 s: every hidden frame is estimated, by the fit and by the thesis's method (whose arms end at the wrist)."""
+    doc = yaml.safe_load((PROFILE_DIR / "qualisys_sports.yaml").read_text())
+    del doc["landmarks"]["L_HM2"], doc["landmarks"]["R_HM2"], doc["tracking"]
+    (tmp_path / "no_hands.yaml").write_text(yaml.safe_dump(doc))
+    profile = load_profile(tmp_path / "no_hands.yaml")
+    rec = read_recording(DATA / "02_qualisys_walking_ezc3d_Qualisys.c3d")
+    cols = list(profile.columns(rec.labels))
+    start = int(0.5 * rec.rate_hz)
+    markers = rec.positions.astype(float)
+    markers[start:, [cols.index(x) for x in ("L_HLE", "L_HME", "R_HLE", "R_HME")]] = np.nan
+    elbows = [INDEX["elbow_l"], INDEX["elbow_r"]]
+    located = SkeletonPipeline(profile, rec.labels, fill_gaps=False).solve_landmarks(
+        SkeletonPipeline(profile, rec.labels, fill_gaps=False).landmarks(rec.positions)).positions
+    fitted, _, _ = fit_take(markers, rec.labels, profile, rec.rate_hz)
+    pipe = SkeletonPipeline(profile, rec.labels, rate_hz=rec.rate_hz)
+    thesis = pipe.solve_landmarks(pipe.landmarks(markers), 0, pipe.landmark_map.tracking(markers), markers)
+    # (the fit calls a joint located where seen markers ride a bone that meets there: the upper arm's wand here)
+    assert (fitted.status[start:, elbows] != Status.MISSING).all()
+    assert (thesis.status[start:, elbows] == Status.ESTIMATED).all()
+    for status in (fitted.status, thesis.status):
+        assert (status[:, INDEX["hand_l"]] == Status.MISSING).all()
+    err = np.linalg.norm(fitted.positions[start:, elbows] - located[start:, elbows], axis=-1)
+    assert err.mean() < 0.03
