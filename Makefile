@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden results results-blend results-beyond results-short targets checks
+.PHONY: demo test setup bench clean golden results results-blend results-beyond results-short targets checks results-rigid
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -183,3 +183,7 @@ results-short: $(STAMP)
 			$(GAPS_BEYOND) --report docs/results/short_elbow_$${take}_$${side}_blend || exit 1; done; done
 	$(BIN)/mocap eval real-gaps --report docs/results/real_gaps_vicon
 
+
+# The thesis's method, the studio options and the rigid-skeleton fit side by side on every take (docs/fit.md).
+results-rigid: $(STAMP)
+	$(BIN)/mocap eval rigid --report docs/results/rigid

@@ -58,10 +58,29 @@ def run(args) -> int:
         w = csv.DictWriter(f, COLUMNS, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    table = render(rows)
+    table = summary(rows) + "\n" + render(rows)
     (out / "rigid.md").write_text(table)
     print(table)
     return 0
+
+
+def summary(rows: list[dict]) -> str:
+    """One line per take and method: the worst case, the elbows and the knees with ankles (mean / max mm over both
+    sides, against the method's own complete solve), and the limb bones' length CV with every marker seen."""
+    def cell(take, method, prefix):
+        got = [r for r in rows if r["take"] == take and r["method"] == method and r["case"].startswith(prefix)]
+        if not got:
+            return ""
+        return f"{sum(r['mean_mm'] for r in got) / len(got):.0f} / {max(r['max_mm'] for r in got):.0f}"
+
+    lines = ["| take | method | worst case | elbow hidden | knee + ankle hidden | bone CV % |", "|---|---|---|---|---|---|"]
+    for take in dict.fromkeys(r["take"] for r in rows):
+        for method in ("thesis", "studio", "fit"):
+            cv = next((r["bone_cv_pct"] for r in rows if r["take"] == take and r["method"] == method
+                       and r["case"] == "all"), float("nan"))
+            lines.append(f"| {take} | {method} | {cell(take, method, 'worst')} | {cell(take, method, 'elbow')} | "
+                         f"{cell(take, method, 'knee_ankle')} | {_f(cv, 2)} |")
+    return "\n".join(lines) + "\n"
 
 
 def _f(x, digits=1) -> str:
