@@ -62,8 +62,8 @@ def main() -> None:
             def pipeline(beyond):
                 def make():
                     pipe = SkeletonPipeline(profile, rec.labels, beyond=beyond, rate_hz=rec.rate_hz)
-                    return lambda x: pipe.solve_landmarks(pipe.landmarks(x[None]), 0, pipe.landmark_map.tracking(x[None]),
-                                                          x[None])
+                    return lambda x: pipe.solve_landmarks(pipe.landmarks(x[None]), 0,
+                                                          pipe.landmark_map.tracking(x[None]), x[None])
                 return make
 
             times = {"thesis's method": per_frame_ms(pipeline(False), markers),

@@ -121,6 +121,9 @@ def add_parser(sub) -> None:
     lt.add_argument("--layout", choices=sorted(LAYOUTS), default="processes",
                     help="where the solving nodes run: a process each (default), one container "
                          "(launch/studio_composed.yaml) or two containers")
+    lt.add_argument("--fit", action="store_true",
+                    help="solve with the rigid-skeleton fit (one skeleton_fit node, the subject calibrated from the "
+                         "take first) instead of hip interpolation, localization and the five IK nodes")
     lt.set_defaults(func=run_latency)
 
     tg = esub.add_parser("targets", help="issue 9's targets, met or not, from the reports under docs/results",
@@ -396,10 +399,17 @@ def run_latency(args) -> int:
     from mocap_cli.qtm_sim import start_emulator
 
     solved = Path(tempfile.mkdtemp(prefix="mocap-latency-")) / "solved.csv"
+    subject = None
+    if args.fit:  # a studio calibrates an actor once: the node gets the subject file, not a live calibration
+        from mocap_core.fit.calibration import calibrate
+
+        rec = read_recording(args.take)
+        subject = str(solved.parent / "subject.yaml")
+        calibrate(rec.positions, rec.labels, load_profile(args.profile), rec.rate_hz).save(subject)
     sim, port = start_emulator(args.take, "--rate", str(args.rate), "--loop")
     try:
         lf = live_graph(port, args.profile, solved, f"latency-{int(time.time())}",
-                        layout=args.layout)
+                        layout=args.layout, subject=subject)
         Launcher(lf).run(duration_s=args.seconds)
     finally:
         sim.send_signal(signal.SIGINT)
@@ -411,10 +421,11 @@ def run_latency(args) -> int:
         log.error("only %d frames reached skeleton/solved in %.0f s: run longer (--seconds)", frames_out, args.seconds)
         return 1
     lat = lat[len(lat) // 10:]  # leave out the first 10% (start-up)
-    hops = 6  # ingest -> hips -> localize -> torso -> limb -> retarget -> log
+    hops = 3 if args.fit else 6  # ingest -> fit -> retarget -> log; ingest -> hips -> localize -> torso -> limb -> ...
     bare = bare_chain(hops, min(3000, int(args.rate * 10)), args.rate) / 1000
     layout = {"processes": "one process per node", "one": "solving nodes in one container",
               "two": "solving nodes in two containers"}[args.layout]
+    layout += ", the rigid-skeleton fit" if args.fit else ""
     md = [f"Full graph ({layout}) fed by the QTM emulator at {args.rate:.0f} Hz for {args.seconds:.0f} s "
           f"({frames_out} frames out of skeleton/solved); latency from entering qtm_ingest to leaving retarget, ms.", "",
           "| chain | hops | p50 | p99 | max | dropped (last hop) | capture frames missing |",
@@ -426,7 +437,9 @@ def run_latency(args) -> int:
           f"ratio (p50): {np.percentile(lat, 50) / np.percentile(bare, 50):.2f}"]
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"latency_{args.rate:.0f}hz{'' if args.layout == 'processes' else '_' + args.layout}.md").write_text("\n".join(md) + "\n")
+    name = (f"latency_{args.rate:.0f}hz{'' if args.layout == 'processes' else '_' + args.layout}"
+            f"{'_fit' if args.fit else ''}")
+    (out / f"{name}.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     return 0
 

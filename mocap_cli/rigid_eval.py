@@ -73,7 +73,8 @@ def summary(rows: list[dict]) -> str:
             return ""
         return f"{sum(r['mean_mm'] for r in got) / len(got):.0f} / {max(r['max_mm'] for r in got):.0f}"
 
-    lines = ["| take | method | worst case | elbow hidden | knee + ankle hidden | bone CV % |", "|---|---|---|---|---|---|"]
+    lines = ["| take | method | worst case | elbow hidden | knee + ankle hidden | bone CV % |",
+             "|---|---|---|---|---|---|"]
     for take in dict.fromkeys(r["take"] for r in rows):
         for method in ("thesis", "studio", "fit"):
             cv = next((r["bone_cv_pct"] for r in rows if r["take"] == take and r["method"] == method
@@ -99,7 +100,7 @@ def render(rows: list[dict]) -> str:
     for r in rows:
         hidden = f"{_f(r.get('mean_mm'))} / {_f(r.get('max_mm'))}" if "mean_mm" in r else ""
         loc = f"({_f(r.get('loc_mean_mm'))} / {_f(r.get('loc_max_mm'))})" if "loc_mean_mm" in r else ""
-        lines.append(f"| {r['take']} | {r['case']} | {r['method']} | {hidden} | {loc} | {_f(r.get('estimated_pct'), 0)} | "
-                     f"{_f(r['bone_cv_pct'], 2)} | {_f(r['bone_dev_max_pct'])} | {_f(r['residual_mm'])} | "
-                     f"{_f(r.get('complete_pct'))} | {r.get('changes_over_1_5', '')} | {_f(r.get('changes_max'), 2)} |")
+        lines.append(f"| {r['take']} | {r['case']} | {r['method']} | {hidden} | {loc} | "
+                     f"{_f(r.get('estimated_pct'), 0)} | {_f(r['bone_cv_pct'], 2)} | {_f(r['bone_dev_max_pct'])} | "
+                     f"{_f(r['residual_mm'])} | {_f(r.get('complete_pct'))} | {r.get('changes_over_1_5', '')} | {_f(r.get('changes_max'), 2)} |")
     return "\n".join(lines) + "\n"

@@ -105,7 +105,7 @@ class SkeletonFitter:
         self.offsets_m = np.where(rows[:, None] >= 0, subject.marker_offsets[np.maximum(rows, 0)], 0.0)
         self.limits = constraints or load_constraints()
         self.w_marker = np.full(len(labels), 1 / s.marker_sigma_m ** 2)
-        self.weights = np.array([0.0, s.robust_m, 1 / s.root_sigma_m ** 2])
+        self.w_root = 1 / s.root_sigma_m ** 2
         self.w_rot = np.full(N_JOINTS, 1 / (s.turn_rad_s / rate_hz) ** 2)
         self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / s.posture_rad ** 2, 0.0)
         self.root = np.zeros(3)
@@ -174,14 +174,13 @@ class SkeletonFitter:
         return L
 
     def _solve(self, x, root_pred, L_pred, iterations, weak=False, robust_m=None):
+        """``weak``: the motion task almost off (a start has no last frame); ``robust_m``: another Cauchy scale."""
         s = self.settings
-        w_rot = self.w_rot * (1e-4 if weak else 1.0)
-        w_root = self.weights[2] * (1e-4 if weak else 1.0)
+        motion = 1e-4 if weak else 1.0
         return fit_pose(self.root, self.R, x, self.bone, self.offsets_m, PARENT_INDEX, self.subject.offsets, SLOT,
-                        UP, CHAINS, ROTATING, root_pred, L_pred, self.w_marker, robust_m or self.weights[1], w_rot, w_root,
-                        self.subject.rest, self.w_rest,
-                        iterations, s.tolerance,
-                        self._P, self._w)
+                        UP, CHAINS, ROTATING, root_pred, L_pred, self.w_marker, robust_m or s.robust_m,
+                        self.w_rot * motion, self.w_root * motion, self.subject.rest, self.w_rest, iterations,
+                        s.tolerance, self._P, self._w)
 
     def _frame(self, residual: float, iterations: int) -> FitFrame:
         seen = self._w > self.settings.located_weight
