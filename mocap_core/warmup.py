@@ -24,7 +24,8 @@ PACKAGE = Path(__file__).resolve().parent
 # Where "this checkout's kernels are compiled" is remembered (next to numba's own cache files).
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
 # every solver among them (a test checks)
-PARTS = ("localization", "rebuild", "pose_memory", "pair_guard", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond")
+PARTS = ("localization", "rebuild", "pose_memory", "pair_guard", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond",
+         "fit")
 
 
 def warm_up(parts: tuple[str, ...] = PARTS) -> None:
@@ -74,6 +75,17 @@ def _warm(part: str) -> None:
         from mocap_core.pair_guard import PairGuard
 
         PairGuard().fill(np.random.default_rng(0).normal(size=(len(LANDMARKS), 3)))
+        return
+    if part == "fit":  # the rigid-skeleton fit: a start, then a frame warm-started from it
+        from mocap_core.fit.fitter import SkeletonFitter
+        from mocap_core.fit.subject import Subject
+        offsets = np.tile([0.0, 0.1, 0.0], (N_JOINTS, 1))
+        markers = np.eye(3) * 0.1
+        subject = Subject("warm_up", offsets, np.ones(N_JOINTS, bool), ["a", "b", "c"], np.zeros(3, np.int64),
+                          markers, np.zeros(3))
+        fitter = SkeletonFitter(subject, ["a", "b", "c"])
+        fitter.fit(markers)
+        fitter.fit(markers)
         return
     if part == "localization":
         Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))

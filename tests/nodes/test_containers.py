@@ -121,7 +121,8 @@ def test_a_killed_container_is_restarted_with_all_its_nodes(tmp_path):
         assert took < 2.0 and not pid_alive(new)
 
 
-@pytest.mark.parametrize("plain_name, source_kind", [("studio", "file_source"), ("qtm_studio", "qtm_ingest")])
+@pytest.mark.parametrize("plain_name, source_kind", [("studio", "file_source"), ("qtm_studio", "qtm_ingest"),
+                                                     ("studio_fit", "file_source")])
 def test_a_composed_studio_file_is_its_plain_twin_with_container_lines(plain_name, source_kind):
     """launch/<name>_composed.yaml must stay the same graph as launch/<name>.yaml."""
     plain = load_launch_file(REPO / "launch" / f"{plain_name}.yaml")
@@ -131,7 +132,7 @@ def test_a_composed_studio_file_is_its_plain_twin_with_container_lines(plain_nam
     kinds = {n.kind: n.container for n in composed.nodes}
     assert kinds[source_kind] is None and kinds["viewer"] is None
     assert {n.container for n in composed.nodes if n.kind in ("ik_gapfill", "retarget", "hip_interpolation",
-                                                              "joint_localization")} == {"core"}
+                                                              "joint_localization", "skeleton_fit")} == {"core"}
     assert re.search(r"container: core", (REPO / "launch" / f"{plain_name}_composed.yaml").read_text())
 
 
