@@ -11,6 +11,7 @@ from mocap_core.fit.calibration import CalibrationSettings, ROTATING, calibrate,
 from mocap_core.fit.compare import bone_lengths, cases
 from mocap_core.fit.fitter import FitSettings, SkeletonFitter
 from mocap_core.fit.kernel import forward
+from mocap_core.fit.live import LiveFit
 from mocap_core.fit.subject import Subject, SubjectError, load_subject
 from mocap_core.fit.take import fit_take
 from mocap_core.pipeline import SkeletonPipeline
@@ -216,3 +217,22 @@ def test_a_marker_set_without_hand_markers_still_gets_its_arms_filled(tmp_path):
         assert (status[:, INDEX["hand_l"]] == Status.MISSING).all()
     err = np.linalg.norm(fitted.positions[start:, elbows] - located[start:, elbows], axis=-1)
     assert err.mean() < 0.03
+
+
+def test_live_calibration_refines_until_the_skeleton_stops_moving():
+    """A stream's first 2 s calibrate, then 4, 8, 16 and 32 s; by 32 s of the karate take no joint moved more than
+    3 mm between two calibrations. The localization comes out before the first, the whole rigid skeleton after."""
+    rec = read_recording(DATA / "08_cmu_135_02_karate_kata.c3d").slice(0, 4000)
+    live = LiveFit(load_profile("cmu41"), rec.labels)
+    at = {}
+    for f in range(len(rec.positions)):
+        calibrations = live.calibrations
+        out = live.add(rec.positions[f].astype(float), f / rec.rate_hz)
+        if live.calibrations != calibrations:
+            at[live.calibrations] = (round(f / rec.rate_hz), live.converged)
+        if f == 100:
+            assert live.subject is None and (out.status == Status.LOCATED).all()
+    assert at == {1: (2, False), 2: (4, False), 3: (8, False), 4: (16, False), 5: (32, True)}
+    assert np.isfinite(out.positions).all()
+    lengths = np.linalg.norm(out.positions[1:] - out.positions[PARENT_INDEX[1:]], axis=1)
+    assert np.allclose(lengths, live.subject.lengths()[1:])
