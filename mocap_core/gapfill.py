@@ -5,14 +5,19 @@ from spine0, the arms from the clavicle at the sternum, the legs from the hip ce
 frame, for every run of missing joints in the limb:
 
 - the IK chain runs from the closest located parent to the next located joint (the target);
-- it starts from the previous frame's solved chain, moved so its root sits on the current root;
+- it starts from the previous frame's solved chain, moved so its root sits on the current root, each
+  bone at its length learned while both its joints were located (the thesis's C# code keeps every
+  bone's length too; taking the last output's lengths, the chain's last bone took up each frame's
+  residual and stretched frame after frame);
 - the chosen solver moves it onto the target; the joints in between are *estimated*, the target
-  keeps its measured position;
+  keeps its measured position if the chain reaches it; out of reach, the target and the joints
+  after it hang at the chain's end, as they are, and the target is *estimated* too;
 - with no located joint after the run (a missing end effector), the previous chain is carried
   rigidly by the change of the root's parent frame since the last frame: it keeps its last
   rotation relative to its parent. Those joints are *held*.
 
-Before the limb has been seen whole once there is no previous chain to start from, so its missing
+A limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
+wrist. Before the limb has been seen whole once there is no previous chain to start from, so its missing
 joints stay missing (the original code started from a default H-Anim pose in Unity's frame, which
 means nothing in a studio's coordinates).
 """

@@ -31,7 +31,6 @@ class FitSettings:
     turn_rad_s: float = 24.0          # how fast a bone may turn against its parent, unseen (the motion task)
     root_sigma_m: float = 0.05        # how far the root may move from its predicted place in a frame
     posture_rad: float = 1.0          # how far a bone may turn from its typical rotation in its parent's frame
-    stray_weights: bool = False
     max_iterations: int = 6
     start_iterations: int = 60        # the first frame (and a re-start) begins from the rest pose
     tolerance: float = 1e-3           # a step below this (rad; m) ends the solve: 0.3 mm at 30 cm, under the noise
@@ -105,9 +104,7 @@ class SkeletonFitter:
         self.bone[~subject.known[np.maximum(self.bone, 0)]] = -1
         self.offsets_m = np.where(rows[:, None] >= 0, subject.marker_offsets[np.maximum(rows, 0)], 0.0)
         self.limits = constraints or load_constraints()
-        stray = np.where(rows >= 0, subject.spread_m[np.maximum(rows, 0)], 0.0)
-        # a marker that strays more on its bone than markers usually sit off theirs counts for less
-        self.w_marker = 1 / np.maximum(s.marker_sigma_m, np.nan_to_num(stray) * s.stray_weights) ** 2
+        self.w_marker = np.full(len(labels), 1 / s.marker_sigma_m ** 2)
         self.w_root = 1 / s.root_sigma_m ** 2
         self.w_rot = np.full(N_JOINTS, 1 / (s.turn_rad_s / rate_hz) ** 2)
         self.w_rest = np.where(np.arange(N_JOINTS) > 0, 1 / s.posture_rad ** 2, 0.0)
