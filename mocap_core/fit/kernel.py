@@ -95,7 +95,7 @@ def limit_locals(L, pp, cones, has_cone, twists, has_twist):
 def _orthonormal(R):
     """The nearest rotation's cheap stand-in: y kept, z made perpendicular, x = y cross z."""
     y = R[:, 1] / vnorm(R[:, 1])
-    z = R[:, 2] - (R[:, 2] @ y) * y
+    z = R[:, 2] - (R[0, 2] * y[0] + R[1, 2] * y[1] + R[2, 2] * y[2]) * y
     z = z / vnorm(z)
     out = np.empty((3, 3))
     out[:, 0] = np.array([y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2], y[0] * z[1] - y[1] * z[0]])
