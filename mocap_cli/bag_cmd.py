@@ -15,7 +15,7 @@ from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, encode
 from mocap_cli.graph_registry import find_graph, publishers_of
 from mocap_cli.launch_file import LaunchError, NodeEntry, load_launch_file
 from mocap_core.recordings import read_recording
-from nodes.bags import BagWriter, bag_info, export_json
+from nodes.bags import BagWriter, bag_info, export_json, free_piece
 
 log = logging.getLogger("mocap.bag")
 SOURCE_KINDS = {"file_source", "qtm_ingest", "synthetic_source", "bag_player"}
@@ -89,8 +89,8 @@ def cmd_record(args) -> int:
         for e in endpoints:
             sock.connect(e)
     launch = Path(graph.get("launch_file") or "")
-    bag = BagWriter(args.output, {"graph": graph["name"], "launch_file": launch.read_text() if launch.is_file() else "",
-                                  "topics": ",".join(topics)})
+    bag = BagWriter(free_piece(args.output), {"graph": graph["name"], "topics": ",".join(topics),
+                                              "launch_file": launch.read_text() if launch.is_file() else ""})
     stop = False
 
     def on_signal(*_):
@@ -101,7 +101,7 @@ def cmd_record(args) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     wanted = set(topics)
     t_end = time.monotonic() + args.duration if args.duration else None
-    log.info("recording %s from graph %s into %s", ", ".join(topics), graph["name"], args.output)
+    log.info("recording %s from graph %s into %s", ", ".join(topics), graph["name"], bag.path)
     try:
         while not stop and (t_end is None or time.monotonic() < t_end):
             if sock.poll(100):
@@ -116,7 +116,7 @@ def cmd_record(args) -> int:
     finally:
         bag.close()
         sock.close(linger=0)
-    log.info("wrote %d messages to %s", bag.count, args.output)
+    log.info("wrote %d messages to %s", bag.count, bag.path)
     return 0
 
 
@@ -152,6 +152,8 @@ def cmd_info(args) -> int:
         print(json.dumps(info, indent=2))
         return 0
     print(f"bag:       {info['path']}\nduration:  {info['duration_s']:.3f} s\nmessages:  {info['messages']}")
+    if len(info["pieces"]) > 1:
+        print(f"pieces:    {len(info['pieces'])} ({', '.join(Path(p).name for p in info['pieces'])}), read as one")
     for name, meta in info["metadata"].items():
         print(f"metadata {name}: " + ", ".join(f"{k}={(v[:60] + '...') if len(v) > 60 else v}" for k, v in meta.items()
                                                 if v))

@@ -4,6 +4,10 @@ Channels use ``message_encoding: msgpack`` with the message's JSON Schema (``sch
 jsonschema``), so any MCAP tool can list and inspect them; ``mocap bag export --json`` rewrites a
 bag with JSON encoding for Foxglove and Lichtblick. Chunks are small (64 KiB), so a recorder killed
 with SIGKILL loses at most its last chunk: :func:`read_bag` reads such a file up to the damage.
+
+A recorder never truncates a file that exists: it writes the next *piece* of the take beside it
+(``take.mcap``, then ``take.1.mcap``, ``take.2.mcap`` ...; :func:`free_piece`), so a recorder that the
+launcher restarts keeps everything recorded before. Reading a bag reads its pieces in order, as one.
 """
 from __future__ import annotations
 
@@ -38,6 +42,27 @@ class BagMessage:
     data: bytes           # the exact wire payload
     log_time_ns: int      # when the recorder received it
     publish_time_ns: int  # capture time of the frame (header.capture_time_s), ns
+
+
+def piece(path: Path, k: int) -> Path:
+    """The take's k-th piece: the path itself for 0, ``stem.k.suffix`` after."""
+    return path if k == 0 else path.with_name(f"{path.stem}.{k}{path.suffix}")
+
+
+def free_piece(path: str | Path) -> Path:
+    """The first piece of ``path`` that does not exist yet (an empty file counts as free)."""
+    path, k = Path(path), 0
+    while piece(path, k).exists() and piece(path, k).stat().st_size > 0:
+        k += 1
+    return piece(path, k)
+
+
+def pieces(path: str | Path) -> list[Path]:
+    """The take's pieces that exist, in order (the path first)."""
+    path, out = Path(path), []
+    while piece(path, len(out)).exists():
+        out.append(piece(path, len(out)))
+    return out
 
 
 class BagWriter:
@@ -99,8 +124,14 @@ def _open(path: Path):
 
 
 def read_bag(path: str | Path, topics: list[str] | None = None) -> Iterator[BagMessage]:
-    """Messages in file order. A bag cut short (recorder killed) is read up to the damage."""
+    """Messages in file order, the take's pieces one after the other. A piece cut short (recorder killed) is read
+    up to the damage."""
     path = Path(path)
+    for part in pieces(path) or [path]:
+        yield from _read_piece(part, topics)
+
+
+def _read_piece(path: Path, topics: list[str] | None) -> Iterator[BagMessage]:
     f = _open(path)
     try:
         reader = NonSeekingReader(f, validate_crcs=True)
@@ -144,8 +175,8 @@ def bag_info(path: str | Path) -> dict:
         span = (s["last_ns"] - s["first_ns"]) / 1e9
         s["rate_hz"] = (s["count"] - 1) / span if span > 0 else 0.0
     duration = (last - first) / 1e9 if first is not None else 0.0
-    return {"path": str(path), "duration_s": duration, "messages": sum(s["count"] for s in stats.values()),
-            "topics": stats, "metadata": bag_metadata(path)}
+    return {"path": str(path), "pieces": [str(p) for p in pieces(path)], "duration_s": duration,
+            "messages": sum(s["count"] for s in stats.values()), "topics": stats, "metadata": bag_metadata(path)}
 
 
 def to_json(value):

@@ -1,4 +1,6 @@
-"""Records ``skeleton/solved`` into a BVH file while the graph streams; the file is written on stop."""
+"""Records ``skeleton/solved`` into a BVH file while the graph streams, on disk a second at a time (a crash loses
+at most the last second). Like the recorder it never truncates a file that exists: a writer restarted after a crash
+goes on in ``path.1.bvh`` (and so on)."""
 from __future__ import annotations
 
 from typing import Literal
@@ -7,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import SkeletonFrame
 from mocap_core.bvh import BvhWriter
+from nodes.bags import free_piece
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message
 
@@ -24,7 +27,10 @@ class BvhWriterNode(Node):
     subscribes = {"skeleton/solved": SkeletonFrame}
 
     def setup(self) -> None:
-        self.bvh = BvhWriter(self.params.path, self.params.rate_hz, self.params.up_axis)
+        path = free_piece(self.params.path)
+        if str(path) != self.params.path:
+            self.log.warning("%s exists: writing the take's next piece, %s", self.params.path, path.name)
+        self.bvh = BvhWriter(path, self.params.rate_hz, self.params.up_axis)
 
     def on_message(self, topic, msg) -> None:
         pos, frames, _ = from_message(msg)
@@ -32,4 +38,4 @@ class BvhWriterNode(Node):
 
     def teardown(self) -> None:
         self.bvh.close()
-        self.log.info("wrote %d frames to %s", len(self.bvh.rows), self.params.path)
+        self.log.info("wrote %d frames to %s", self.bvh.frames, self.bvh.path)

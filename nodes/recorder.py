@@ -2,7 +2,10 @@
 
 As a node it is wired by the launcher like any subscriber, so sources wait for it: nothing is
 lost at start-up. SIGINT/SIGTERM finish the file after the frames already queued for it are
-written (``drain_on_stop``); after SIGKILL everything but the last chunk is readable.
+written (``drain_on_stop``); after SIGKILL everything but the last chunk is readable. It never
+truncates a file that exists: a recorder restarted after a crash (or a graph launched again with
+the same path) writes the take's next piece, ``path.1.mcap`` and so on, and reading the path reads
+every piece (nodes/bags.py).
 """
 from __future__ import annotations
 
@@ -11,7 +14,7 @@ import platform
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import Message
-from nodes.bags import BagWriter
+from nodes.bags import BagWriter, free_piece
 from nodes.runtime import Node
 
 
@@ -35,7 +38,11 @@ class Recorder(Node):
         import mcap
         import messages
 
-        self.bag = BagWriter(self.params.path, {
+        path = free_piece(self.params.path)
+        if str(path) != self.params.path:
+            self.log.warning("%s exists: recording the take's next piece, %s (read as one with it)",
+                             self.params.path, path.name)
+        self.bag = BagWriter(path, {
             "graph": self.ctx.spec.graph, "node": self.ctx.spec.id, "launch_file": self.params.launch_file,
             "python": platform.python_version(), "mcap": getattr(mcap, "__version__", "?"),
             "messages": ",".join(f"{m.SCHEMA}:{m.VERSION}" for m in messages.ALL_MESSAGES)})
@@ -54,4 +61,4 @@ class Recorder(Node):
             self.bag.add_metadata("marker_set", {"labels": ",".join(self.marker_set.labels),
                                                  "rate_hz": self.marker_set.rate_hz, "source": self.marker_set.source})
         self.bag.close()
-        self.log.info("wrote %d messages to %s", self.bag.count, self.params.path)
+        self.log.info("wrote %d messages to %s", self.bag.count, self.bag.path)

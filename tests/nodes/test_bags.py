@@ -89,6 +89,33 @@ nodes:
     assert len(frames) > 100 and frames == list(range(len(frames)))
 
 
+def test_a_restarted_recorder_keeps_the_take_and_goes_on_in_a_new_piece(tmp_path):
+    """kill -9 of a recorder that the launcher restarts: everything recorded before the kill stays (the restart
+    writes take.1.mcap beside it, never over it), and reading take.mcap reads both pieces as one take."""
+    bag = tmp_path / "take.mcap"
+    graph = f"""
+nodes:
+  - {{id: src, kind: synthetic_source, params: {{rate_hz: 500, frames: 0}}}}
+  - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [markers/raw]}}}}
+"""
+    with launched(tmp_path, graph) as g:
+        wait_for(lambda: bag.exists() and bag.stat().st_size > 300_000, 30, "a few chunks on disk")
+        os.kill(g.node_pids()["rec"], signal.SIGKILL)
+        size = bag.stat().st_size
+        second = tmp_path / "take.1.mcap"
+        wait_for(lambda: second.exists() and second.stat().st_size > 100_000, 30, "the restarted recorder's piece")
+    assert bag.stat().st_size == size  # not truncated, not written again
+    frames = [decode(m.data, m.topic).header.frame for m in read_bag(bag)]  # both pieces
+    assert frames[0] == 0
+    cut = int(np.argmax(np.diff(frames) != 1)) + 1  # where the first piece ends and the second begins
+    assert cut > 100 and frames[:cut] == list(range(cut)) and frames[cut] > frames[cut - 1]
+    assert frames[cut:] == list(range(frames[cut], frames[cut] + len(frames) - cut))
+    info = bag_info(bag)
+    assert info["pieces"] == [str(bag), str(second)] and info["messages"] == len(frames)
+    r = mocap("bag", "info", str(bag))
+    assert r.returncode == 0 and "pieces:    2 (take.mcap, take.1.mcap), read as one" in r.stdout
+
+
 def test_a_finished_source_still_delivers_its_last_frames_to_a_slow_subscriber(tmp_path):
     """A source that ends must not drop what it already sent but ZeroMQ has not yet delivered.
 

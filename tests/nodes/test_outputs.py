@@ -126,6 +126,25 @@ def test_bvh_read_back_by_bvhio_reproduces_the_joints(tmp_path):
     assert worst < 0.005, f"BVH forward kinematics off by {worst * 1000:.2f} mm"
 
 
+def test_bvh_on_disk_is_whole_after_every_second_so_a_crash_loses_at_most_one(tmp_path):
+    """The BVH writer streams: mid-take, without close, another reader gets a whole BVH holding every frame up to the
+    last second's flush (before, every frame stayed in memory until close, and a crash lost the take)."""
+    import bvhio
+
+    from mocap_core.bvh import BvhWriter
+    from mocap_core.synthetic import running_take
+
+    _, truth = running_take(seconds=3.5, rate_hz=100.0)
+    writer = BvhWriter(tmp_path / "live.bvh", 100.0, "z")
+    frames = np.tile(np.eye(3), (len(JOINTS), 1, 1))
+    for f in range(len(truth)):
+        writer.add(truth[f], frames)
+    on_disk = bvhio.readAsHierarchy(str(tmp_path / "live.bvh"))  # the writer still open: as after a crash
+    assert len(on_disk.Keyframes) == 300 and writer.frames == 350
+    writer.close()
+    assert len(bvhio.readAsHierarchy(str(tmp_path / "live.bvh")).Keyframes) == 350
+
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync"]
