@@ -19,6 +19,7 @@ from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.localization import Localizer
+from mocap_core.marker_gate import MarkerGate
 from mocap_core.profiles import Profile
 
 
@@ -47,6 +48,7 @@ class SkeletonPipeline:
         ``fill_options``: the gap filler's options instead of ``beyond``'s (gapfill.BEYOND_THESIS)."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
         self.landmark_map = profile.resolve(labels)
+        self.gate = MarkerGate()
         self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
         on = beyond and fill_gaps  # the landmark fills are gap fills
         self.fills = LandmarkFills(on, on, self.landmark_map.tracking_of, self.landmark_map.present(),
@@ -77,6 +79,7 @@ class SkeletonPipeline:
         return SolvedChunk(start, pos, frames, status)
 
     def run(self, markers: np.ndarray, chunk: int = 250) -> Iterator[SolvedChunk]:
+        """A take's frames, the markers no body could have put there dropped first (mocap_core.marker_gate)."""
         for start in range(0, len(markers), chunk):
-            part = markers[start:start + chunk]
+            part = self.gate.filter_take(markers[start:start + chunk], self.frame_s, start)
             yield self.solve_landmarks(self.landmarks(part), start, self.landmark_map.tracking(part), part)

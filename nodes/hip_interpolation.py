@@ -1,6 +1,7 @@
 """Stage 2: apply the marker-set profile and fill missing pelvis markers (thesis 3.4.8).
 
-Reads ``markers/raw`` (the recording's own labels) and publishes ``markers/filled``: one marker per
+Reads ``markers/raw`` (the recording's own labels), drops the markers no body could have put there (counted as
+``marker_jump``; mocap_core.marker_gate), and publishes ``markers/filled``: one marker per
 landmark of the profile (the PAF names, mocap_core.profiles.LANDMARKS), so every later stage is
 independent of the marker set. Flags: measured, interpolated (the pelvis markers this node
 predicted, and with ``rebuild`` the forearm, foot, shank and acromion landmarks it rebuilt, with the help of
@@ -17,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
 from mocap_core.landmark_fills import LandmarkFills
+from mocap_core.marker_gate import MarkerGate
 from mocap_core.pair_guard import PAIR_GUARD_HELP
 from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.profiles import LANDMARKS, load_profile
@@ -53,6 +55,7 @@ class HipInterpolation(Node):
             warm_up(("pair_guard",))
         self.labels: list[str] | None = None
         self.map = None
+        self.gate = MarkerGate()  # markers no body could have put there never reach what the stages learn
 
     def on_message(self, topic, msg: MarkerFrame) -> None:
         if msg.labels != self.labels:  # first frame, or the marker set changed: resolve again
@@ -65,12 +68,15 @@ class HipInterpolation(Node):
                 self.log.warning("tracking markers %s of profile %s are not in the stream: gaps filled "
                                  "without them", ", ".join(self.map.absent_tracking), self.profile.name)
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
-        lm = self.map.apply(msg.positions)
+        positions, dropped = self.gate.filter(msg.positions, msg.header.capture_time_s)
+        for k in np.flatnonzero(dropped):
+            self.ctx.bad_input("marker_jump", f"{msg.labels[k]} moved faster than a body can: dropped this frame")
+        lm = self.map.apply(positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
         fills_on = self.params.rebuild or self.params.pose_memory  # (both read the tracking markers)
-        rebuilt = self.fills.fill(lm, self.map.tracking(msg.positions) if fills_on else None,
-                                  msg.header.capture_time_s, msg.positions)
+        rebuilt = self.fills.fill(lm, self.map.tracking(positions) if fills_on else None,
+                                  msg.header.capture_time_s, positions)
         if self.fills.guard is not None:
             for said in self.fills.guard.said():
                 self.ctx.bad_input("pair_dropped", f"{said}: both dropped until their spacing is back")

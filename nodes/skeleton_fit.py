@@ -8,6 +8,7 @@ calibration has converged.
 """
 from __future__ import annotations
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import MarkerFrame, SkeletonFrame
@@ -50,6 +51,8 @@ class SkeletonFit(Node):
                                 LiveSettings(first_s=self.params.first_calibration_s))
         calibrations = self.live.calibrations
         out = self.live.add(msg.positions.astype(float), msg.header.capture_time_s)
+        for k in np.flatnonzero(self.live.dropped):
+            self.ctx.bad_input("marker_jump", f"{self.labels[k]} moved faster than a body can: dropped this frame")
         if self.live.calibrations != calibrations:
             self.log.info("calibrated the subject (%d frames)%s", self.live.subject.frames,
                           ", converged" if self.live.converged else "")

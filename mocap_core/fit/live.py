@@ -17,6 +17,7 @@ from mocap_core.fit.calibration import CalibrationSettings, calibrate
 from mocap_core.fit.fitter import FitFrame, FitSettings, SkeletonFitter
 from mocap_core.fit.subject import Subject
 from mocap_core.localization import Localizer
+from mocap_core.marker_gate import MarkerGate
 from mocap_core.profiles import Profile
 
 
@@ -42,9 +43,13 @@ class LiveFit:
         self._times: list[float] = []
         self._stride, self._seen, self._next_s = 1, 0, self.live.first_s
         self.calibrations = 0
+        self.gate = MarkerGate()
+        self.dropped = np.zeros(len(labels), bool)
 
     def add(self, markers: np.ndarray, time_s: float) -> FitFrame:
-        """One frame's markers (M, 3) in metres at capture time ``time_s`` -> the skeleton."""
+        """One frame's markers (M, 3) in metres at capture time ``time_s`` -> the skeleton (``self.dropped``: the
+        markers of this frame that no body could have put there, dropped first)."""
+        markers, self.dropped = self.gate.filter(markers, time_s)
         if not self.converged:
             self._keep(markers, time_s)
             if self._times and time_s - self._times[0] >= self._next_s:
