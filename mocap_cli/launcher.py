@@ -261,7 +261,7 @@ class Launcher:
                 continue
             if verb != b"ready" or not rest:
                 continue
-            node_id = rest[0].decode()
+            node_id = rest[0].decode(errors="replace")  # a stray peer's bytes name no node: ignored, never fatal
             for p in self.procs:
                 if p.spec.id == node_id:
                     p.ready, p.identity = True, identity

@@ -71,3 +71,30 @@ def test_default_transport_is_private(tmp_path):
 
     with pytest.raises(LaunchError, match="set transport.kind: tcp"):
         load_launch_file(f)
+
+
+def test_a_bad_message_on_the_control_socket_never_stops_the_graph(tmp_path):
+    """A peer sending `ready` with bytes that are no UTF-8 (and other junk) to the launcher's control socket: the
+    launcher ignores it and the graph runs on (it used to die on a UnicodeDecodeError, taking every node down)."""
+    import json
+
+    graph = """
+nodes:
+  - {id: src, kind: synthetic_source, params: {rate_hz: 200, frames: 0}}
+  - {id: a, kind: relay, remaps: {in: markers/raw, out: relayed}}
+"""
+    with launched(tmp_path, graph) as g:
+        wait_for(lambda: "starting sources" in g.log(), 30, "the graph to start")
+        control = json.loads(g.registry_file.read_text())["control"]
+        sock = zmq.Context.instance().socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 2000)  # (delivered before the socket goes)
+        sock.connect(control)
+        for junk in ([b"ready", b"\xff\xfe"], [b"ready"], [b"\x00" * 64], [b"warm", b"x", b"y"]):
+            sock.send_multipart(junk)
+        sock.close()
+        time.sleep(1.0)
+        assert g.proc.poll() is None, g.log()
+        nodes = g.cli("node", "list")
+        assert all("running" in line for line in nodes.stdout.splitlines() if line.startswith(("src", "a "))), \
+            nodes.stdout
+    assert "Traceback" not in g.log()
