@@ -102,29 +102,56 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     return node, param, yaml.safe_load(value) if value else ""
 
 
+# The most YAML nodes a launch file may expand to (its aliases followed): a real graph has a few hundred; a "billion
+# laughs" file of a few hundred bytes expands to billions, which validating would take minutes and gigabytes over.
+MAX_YAML_NODES = 100_000
+
+
+def _expanded_size(node, budget: int) -> int:
+    """How many nodes the YAML graph holds with its aliases followed, counting no further than ``budget``."""
+    count, stack = 0, [node]
+    while stack and count <= budget:
+        n = stack.pop()
+        count += 1
+        if isinstance(n, yaml.SequenceNode):
+            stack.extend(n.value)
+        elif isinstance(n, yaml.MappingNode):
+            stack.extend(v for pair in n.value for v in pair)
+    return count
+
+
 def load_launch_file(path: str | Path, overrides: list[str] = ()) -> LaunchFile:
+    """The launch file with the ``--set`` overrides applied, all of it validated together (an override gets the
+    same checks as the file: a kind of null, 0 or 1000 replicas are refused with the node and the field named)."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
+        text = path.read_text()
+        if _expanded_size(yaml.compose(text), MAX_YAML_NODES) > MAX_YAML_NODES:
+            raise LaunchError(f"launch file {path}: expands to over {MAX_YAML_NODES} YAML nodes through its aliases; "
+                              "a graph needs far fewer (write the nodes out)")
+        raw = yaml.safe_load(text)
     except FileNotFoundError:
         raise LaunchError(f"launch file {path} not found") from None
     except yaml.YAMLError as e:
         raise LaunchError(f"launch file {path}: not valid YAML ({e})") from None
-    if not isinstance(raw, dict):
+    if not isinstance(raw, dict) or not isinstance(raw.get("nodes"), list):
         raise LaunchError(f"launch file {path}: expected a mapping with a 'nodes' list")
     raw.setdefault("name", path.stem)
-    try:
-        lf = LaunchFile.model_validate(raw)
-    except ValidationError as e:
-        lines = [f"  {'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in e.errors()]
-        raise LaunchError(f"launch file {path} is invalid:\n" + "\n".join(lines)) from None
-    by_id = {n.id: n for n in lf.nodes}
+    by_id = {n.get("id"): n for n in raw["nodes"] if isinstance(n, dict)}
     for text in overrides:
         node, param, value = parse_override(text)
         if node not in by_id:
-            raise LaunchError(f"--set {text!r}: no node {node!r} in {path} (nodes: {', '.join(by_id)})")
-        if param in ("kind", "replicas"):
-            setattr(by_id[node], param, value)
+            raise LaunchError(f"--set {text!r}: no node {node!r} in {path} (nodes: {', '.join(map(str, by_id))})")
+        if param in NodeEntry.model_fields and param not in ("id", "params"):
+            by_id[node][param] = value
         else:
-            by_id[node].params[param] = value
-    return lf
+            by_id[node].setdefault("params", {})
+            if not isinstance(by_id[node]["params"], dict):
+                raise LaunchError(f"--set {text!r}: node {node}'s params are not a mapping")
+            by_id[node]["params"][param] = value
+    try:
+        return LaunchFile.model_validate(raw)
+    except ValidationError as e:
+        lines = [f"  {'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in e.errors()]
+        said = f" (with --set {', '.join(overrides)})" if overrides else ""
+        raise LaunchError(f"launch file {path}{said} is invalid:\n" + "\n".join(lines)) from None

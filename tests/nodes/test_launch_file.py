@@ -1,7 +1,12 @@
+import subprocess
+import sys
+import time
+
 import pytest
 
 from mocap_cli.launch_file import LaunchError, load_launch_file, parse_override
 from mocap_cli.launcher import plan
+from tests.conftest import REPO
 
 
 def test_override_parses_yaml_values():
@@ -43,3 +48,26 @@ def test_bad_files(tmp_path):
     f.write_text("nodes: [{id: a, kind: relay}]")
     with pytest.raises(LaunchError, match="no node 'b'"):
         load_launch_file(f, ["b.x=1"])
+
+
+def test_overrides_get_the_files_checks_and_an_alias_bomb_is_refused(tmp_path):
+    """`--set torso.kind=null` was a TypeError traceback, `replicas=1000` planned 1,010 processes, `replicas=0`
+    dropped the node silently, and a 600-byte YAML alias bomb took 34 s and 4 GB before its error."""
+    studio = REPO / "launch" / "studio.yaml"
+    for setting, said in (("torso.kind=null", "nodes.3.kind"), ("torso.replicas=1000", "less than or equal to 64"),
+                          ("torso.replicas=0", "greater than or equal to 1")):
+        with pytest.raises(LaunchError, match=said):
+            load_launch_file(studio, [setting])
+    assert load_launch_file(studio, ["torso.replicas=2"]).nodes[3].replicas == 2
+    bomb = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, "
+        f"*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}]\n"
+        for i in range(8)) + "nodes: [{id: x, kind: relay, params: {p: *i}}]\n"
+    (tmp_path / "bomb.yaml").write_text(bomb)
+    t = time.monotonic()
+    with pytest.raises(LaunchError, match="aliases"):
+        load_launch_file(tmp_path / "bomb.yaml")
+    assert time.monotonic() - t < 2
+    r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "launch", str(studio), "--plan", "--set",
+                        "torso.kind=null"], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "torso.kind=null" in r.stderr
