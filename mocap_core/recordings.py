@@ -44,7 +44,10 @@ def _finish(labels, xyz_units: np.ndarray, units: str, rate: float, source: str,
     if scale is None:
         raise RecordingError(f"{source}: unknown length unit {units!r} (known: {', '.join(UNIT_SCALE)})")
     pos = np.asarray(xyz_units, dtype=np.float64) * scale
+    if pos.ndim != 3 or pos.shape[0] == 0:
+        raise RecordingError(f"{source}: no frames")
     pos[np.all(pos == 0.0, axis=2)] = np.nan
+    pos[~np.isfinite(pos).all(axis=2)] = np.nan  # an infinite coordinate is no position: occluded
     if not rate or not np.isfinite(rate) or rate <= 0:
         raise RecordingError(f"{source}: bad capture rate {rate!r}")
     if len(set(labels)) != len(labels):
@@ -124,7 +127,10 @@ def read_trc(path: Path) -> Recording:
         if not line.strip():
             continue
         cells = line.split("\t")
-        vals = [float(c) if c.strip() else np.nan for c in cells[2: 2 + 3 * n_markers]]
+        try:
+            vals = [float(c) if c.strip() else np.nan for c in cells[2: 2 + 3 * n_markers]]
+        except ValueError as e:
+            raise RecordingError(f"{path} line {lineno}: not a number ({e})") from None
         if len(vals) < 3 * n_markers:
             raise RecordingError(f"{path} line {lineno}: {len(vals)} values, expected {3 * n_markers} "
                                  "(truncated file?)")
@@ -150,9 +156,17 @@ def read_mat(path: Path, take: str | None = None) -> Recording:
     if name not in takes:
         raise RecordingError(f"{path}: no take {name!r} (takes: {', '.join(sorted(takes))})")
     t = takes[name]
-    labels = [str(x) for x in np.atleast_1d(t.markerName)]
-    data = np.asarray(t.data, dtype=np.float64).reshape(int(t.nFrames), len(labels), 3)
-    return _finish(labels, data, "mm", float(t.freq), f"{path}:{name}", meta={"take": name})
+    try:
+        labels = [str(x) for x in np.atleast_1d(t.markerName)]
+        frames = int(t.nFrames)
+        if frames <= 0:
+            raise ValueError(f"nFrames is {frames}")
+        data = np.asarray(t.data, dtype=np.float64).reshape(frames, len(labels), 3)
+        rate = float(t.freq)
+    except (AttributeError, TypeError, ValueError) as e:
+        raise RecordingError(f"{path}: take {name!r} is malformed ({e}); a MoCap Toolbox take has nFrames, freq, "
+                             "markerName and data (nFrames x 3 markers)") from None
+    return _finish(labels, data, "mm", rate, f"{path}:{name}", meta={"take": name})
 
 
 def read_recording(path: str | Path, take: str | None = None) -> Recording:

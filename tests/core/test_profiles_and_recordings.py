@@ -61,6 +61,34 @@ def test_truncated_and_corrupt_files_give_clear_errors(tmp_path):
         read_recording(f"{data_file('13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat')}:dance9")
 
 
+def test_malformed_values_name_the_file_and_place(tmp_path):
+    """A TRC cell that is no number was a bare "could not convert string to float: 'x'"; a MAT take of -10 or 0
+    frames was accepted (or a ValueError); infinite coordinates were taken as positions."""
+    from scipy.io import loadmat, savemat
+
+    lines = data_file("03_sprint_start_BTK_SprintMotion.trc").read_text().splitlines()
+    cells = lines[9].split("\t")
+    cells[5] = "x"
+    lines[9] = "\t".join(cells)
+    (tmp_path / "x.trc").write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=r"x\.trc line 10: not a number"):
+        read_recording(tmp_path / "x.trc")
+    cells[5] = "inf"
+    lines[9] = "\t".join(cells)
+    (tmp_path / "inf.trc").write_text("\n".join(lines) + "\n")
+    rec = read_recording(tmp_path / "inf.trc")
+    assert np.isfinite(rec.positions).all(axis=2).sum() == rec.positions[..., 0].size - 1
+    mat = loadmat(str(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat")), squeeze_me=True,
+                  struct_as_record=False)
+    take = mat["walk1"]
+    for frames in (-10, 0):
+        fields = {name: getattr(take, name) for name in take._fieldnames}
+        fields["nFrames"] = frames
+        savemat(str(tmp_path / "bad.mat"), {"walk1": fields})
+        with pytest.raises(RecordingError, match="take 'walk1' is malformed"):
+            read_recording(tmp_path / "bad.mat")
+
+
 def test_profile_errors_name_the_line(tmp_path):
     p = tmp_path / "mine.yaml"
     p.write_text("name: mine\nlandmarks:\n  SACR: SACR\n  L_IAS: LASI2\n  R_IAS: RASI\n")
