@@ -6,9 +6,21 @@ import os
 from pathlib import Path
 
 
+class RegistryError(Exception):
+    pass
+
+
 def registry_dir() -> Path:
+    """The user's private registry folder (0700; an older one of the user's is made so). One that another user made
+    is refused: its graph files tell the CLI tools which endpoints to connect to."""
     d = Path(os.environ.get("MOCAP_RUN_DIR") or f"/tmp/mocap-{os.getuid()}")
-    d.mkdir(parents=True, exist_ok=True)
+    d.mkdir(mode=0o700, parents=True, exist_ok=True)
+    st = d.stat()
+    if st.st_uid != os.getuid():
+        raise RegistryError(f"graph registry {d} belongs to another user (uid {st.st_uid}); remove it or set "
+                            "MOCAP_RUN_DIR to a folder of your own")
+    if st.st_mode & 0o077:
+        d.chmod(0o700)
     return d
 
 

@@ -12,7 +12,7 @@ from mocap_core.ik.constraints import ConstraintsError
 from mocap_core.ik.solvers import UnknownSolver
 from mocap_core.profiles import ProfileError
 from mocap_core.recordings import RecordingError
-from mocap_cli.graph_registry import NoGraph, find_graph, running_graphs
+from mocap_cli.graph_registry import NoGraph, RegistryError, find_graph, running_graphs
 from nodes.bags import BagError
 from mocap_cli.launch_file import LaunchError, load_launch_file
 from nodes.runtime import configure_logging
@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args) or 0
     except (LaunchError, NoGraph, RecordingError, ProfileError, ConstraintsError, UnknownSolver, BagError,
-            SubjectError) as e:
+            SubjectError, RegistryError) as e:
         logging.getLogger("mocap").error("%s", e)
         return 2
     except KeyboardInterrupt:

@@ -98,3 +98,30 @@ nodes:
         assert all("running" in line for line in nodes.stdout.splitlines() if line.startswith(("src", "a "))), \
             nodes.stdout
     assert "Traceback" not in g.log()
+
+
+def test_the_graph_registry_is_private(tmp_path, monkeypatch):
+    """The registry folder was made 0755 with no owner check: now 0700, an older one of the user's tightened, and
+    one that another user made refused with a clear error."""
+    import os
+    import stat
+
+    import pytest
+
+    from mocap_cli.graph_registry import RegistryError, registry_dir
+
+    fresh = tmp_path / "fresh"
+    monkeypatch.setenv("MOCAP_RUN_DIR", str(fresh))
+    assert stat.S_IMODE(registry_dir().stat().st_mode) == 0o700
+    old = tmp_path / "old"
+    old.mkdir(mode=0o777)
+    old.chmod(0o777)
+    monkeypatch.setenv("MOCAP_RUN_DIR", str(old))
+    assert stat.S_IMODE(registry_dir().stat().st_mode) == 0o700
+    if os.getuid() == 0:  # (only root can give a folder away)
+        theirs = tmp_path / "theirs"
+        theirs.mkdir()
+        os.chown(theirs, 65534, 65534)
+        monkeypatch.setenv("MOCAP_RUN_DIR", str(theirs))
+        with pytest.raises(RegistryError, match="belongs to another user"):
+            registry_dir()
