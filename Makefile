@@ -43,7 +43,7 @@ golden: $(STAMP)
 	$(BIN)/mocap bag play /tmp/mocap-golden-raw.mcap --launch launch/studio.yaml --lockstep --restamp \
 		--record tests/data/golden_solved.mcap --set viewer.port=0 --set retarget.max_wait_ms=5000
 
-# The README's Results: thesis Tables 4.1-4.3 and Figures 4.5-4.6/4.10 reproduced on ../shared/data.
+# docs/results.md: thesis Tables 4.1-4.3 and Figures 4.5-4.6/4.10 reproduced on ../shared/data.
 results: $(STAMP)
 	$(BIN)/mocap eval timing --report docs/results/timing
 	$(BIN)/mocap eval gaps --remove elbow_l --from 1 --report docs/results/elbow_sprint

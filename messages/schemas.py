@@ -66,7 +66,7 @@ class MarkerSet(Message):
 class MarkerFrame(Message):
     """One frame of labelled markers (``markers/raw``, ``markers/filled``).
 
-    Departure from DESIGN (documented in the README): the frame carries its labels, so every frame
+    Departure from DESIGN (documented in docs/graph.md): the frame carries its labels, so every frame
     is self-describing; a node that joins late or a bag cut anywhere needs no earlier MarkerSet.
     ``flags`` per marker: 0 measured, 1 interpolated, 2 missing.
     """

@@ -40,7 +40,7 @@ def add_parser(sub) -> None:
     s.add_argument("--max-iterations", type=int, default=140)
     s.add_argument("--stop-distance", type=float, default=0.01, help="IK stop distance in metres")
     s.add_argument("--joints-out", help="output joints CSV")
-    s.add_argument("--bvh-out", help="output BVH (Y up, metres; see the README)")
+    s.add_argument("--bvh-out", help="output BVH (Y up, metres; see docs/graph.md)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=run)
 

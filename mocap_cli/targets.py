@@ -1,5 +1,5 @@
 """`mocap eval targets`: issue 9's targets checked against the reports `make results results-beyond results-short`
-write under docs/results, so the figures in the README's table come from one place and cannot go stale unseen.
+write under docs/results, so the figures in docs/results.md's table come from one place and cannot go stale unseen.
 
 Each target names its cases (a report and a joint) and its limits; the check reads only the reports' CSVs."""
 from __future__ import annotations
@@ -38,7 +38,7 @@ KNEE_ANKLE_CASES = (
 KNEE_ANKLE_MEAN_M = 0.030
 KNEE_ANKLE = f"knee and ankle: mean <= {1000 * KNEE_ANKLE_MEAN_M:g} mm"
 
-# Every solver within this of the best, with the thesis's method (the README's Table 4.1: the sprint's elbow).
+# Every solver within this of the best, with the thesis's method (docs/results.md, Table 4.1: the sprint's elbow).
 SOLVERS_REPORT, SOLVERS_JOINT, SOLVERS_RATIO = "elbow_sprint", "elbow_l", 1.5
 SOLVERS = f"every solver within {SOLVERS_RATIO:g}x of the best"
 

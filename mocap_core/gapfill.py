@@ -53,7 +53,7 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
 }
 LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
 # The gap-filling options beyond the thesis, as the studio launch files, `mocap solve` and
-# `mocap eval timing --beyond` use them (README "Results").
+# `mocap eval timing --beyond` use them (docs/gap_filling.md).
 BEYOND_THESIS = {"swivel": True, "segment_carry": True, "limb_memory": True, "learned_lengths": True,
                  "body_model": True, "end_model": True, "reacquire_step_m": 0.01, "blend_half_life_s": 0.1}
 # What each of them does, said once for the node's params and `mocap eval gaps --help`.

@@ -7,7 +7,7 @@ A joint whose landmarks are missing is reported missing; it is never invented he
 All formulas are written in a right-handed world frame with physical directions ("right",
 "forward", "medial") built from the markers, so any right-handed, any-up-axis recording works.
 The thesis's code ran in Unity's left-handed frame; where a cross product's sign therefore
-changes, the physical direction is what we keep (see the README's localization notes).
+changes, the physical direction is what we keep (see docs/solving.md, "Localization").
 
 Per-subject estimates (chest depth, shoulder width, height, mass) are running means over the
 frames seen so far (facts 7.3). They live in :class:`BodyEstimate`, owned by the caller, so the
@@ -357,7 +357,7 @@ def _localize_frame(lm, pos, frames, used, body, sums, counts):
         fal, tam, fcc, fm2 = lm[M[M_FAL]], lm[M[M_TAM]], lm[M[M_FCC]], lm[M[M_FM2]]
         knee_fb, kmedial_fb = _hinge_from_lateral(hip, fle, fal, -arm_sign, medial_pelvis, knee_off)
         kmedial = _first2(_unit(fme - fle), kmedial_fb)
-        # regression e2 signs: + is medial for the left knee and the right ankle (README)
+        # regression e2 signs: + is medial for the left knee and the right ankle (docs/solving.md)
         knee = _first2(0.5 * (fle + fme), _first2(_regression(fle, fal, ttc, True, -0.1033, arm_sign * 0.09814, 0.0597),
                                                   knee_fb))
         amedial = _first2(_unit(tam - fal), _unit(_reject(kmedial, _unit(fal - fle))))

@@ -1,6 +1,6 @@
 """Marker-set profiles: map the landmarks that localization uses onto a recording's labels.
 
-A profile is a YAML file (see profiles/*.yaml and the README's "Writing a marker-set profile"):
+A profile is a YAML file (see profiles/*.yaml and the README's "Your own marker set"):
 
 ```yaml
 name: cmu41
