@@ -128,7 +128,7 @@ results-beyond: $(STAMP)
 			--profile dance28 --remove elbow_$$side --from 1 --solvers ccd $(GAPS_BEYOND) \
 			--report docs/results/elbow_swivel_$${take}_$$side \
 			|| exit 1; done; done
-	# the pose memory on every leg of the 28-marker set (the dances 5-15 s, the walks from 2 s): issue 9's table
+	# the pose memory on every leg of the 28-marker set (the dances 5-15 s, the walks from 2 s): the targets' table
 	for take in dance1 dance2 walk1 walk2; do for side in l r; do \
 		case $$take in dance*) window="--from 5 --to 15";; *) window="--from 2";; esac; \
 		$(BIN)/mocap eval gaps --take ../shared/data/13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat:$$take \

@@ -1,4 +1,4 @@
-"""Timed bag replay (issue 7): a 300 Hz bag played back and recorded again; how far each message's
+"""Timed bag replay: a 300 Hz bag played back and recorded again; how far each message's
 spacing strays from the recorded spacing (target: within 1 ms at p99).
 
     python benchmarks/bag_timing.py [--seconds 20] [--rate-hz 300]

@@ -1,4 +1,4 @@
-"""Per-frame cost of the limb memory in the IK stage (issue 9's budget: a full-body frame within the IK
+"""Per-frame cost of the limb memory in the IK stage (the budget: a full-body frame within the IK
 budget, 0.3 ms mean and 1 ms max).
 
 CMU karate (43 s at 120 Hz): the left elbow's marker is hidden from 20 s, so by then both arms'

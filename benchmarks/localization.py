@@ -1,4 +1,4 @@
-"""Per-frame cost of the stages that run on every frame (issue 3's budget: localization <= 50 us).
+"""Per-frame cost of the stages that run on every frame (the budget: localization <= 50 us).
 
     python benchmarks/localization.py
 """

@@ -1,4 +1,4 @@
-"""QTM emulator -> qtm_ingest -> subscriber at 1000 Hz (issue 5): drops and latency.
+"""QTM emulator -> qtm_ingest -> subscriber at 1000 Hz: drops and latency.
 
     python benchmarks/qtm_ingest.py [--seconds 60] [--rate 1000]
 

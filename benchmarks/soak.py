@@ -1,4 +1,4 @@
-"""Soak (issue 10; not run in CI): the full graph fed by the QTM emulator at 1000 Hz for 10 minutes.
+"""Soak (not run in CI): the full graph fed by the QTM emulator at 1000 Hz for 10 minutes.
 Reports drops, throughput and each node's RSS at the start and the end (memory must stay flat).
 
     python benchmarks/soak.py [--minutes 10] [--rate 1000] [--layout one|processes|two]

@@ -1,4 +1,4 @@
-"""Transport benchmark (issue 2): one-way latency through 1 and 5 relay hops with our runtime, next
+"""Transport benchmark: one-way latency through 1 and 5 relay hops with our runtime, next
 to a bare pyzmq PUB/SUB relay chain with the same hops, measured in the same run; and the codec's
 encode + decode + validate cost for a 35-marker frame.
 

@@ -126,9 +126,9 @@ def add_parser(sub) -> None:
                          "take first) instead of hip interpolation, localization and the five IK nodes")
     lt.set_defaults(func=run_latency)
 
-    tg = esub.add_parser("targets", help="issue 9's targets, met or not, from the reports under docs/results",
+    tg = esub.add_parser("targets", help="the gap-filling targets, met or not, from the reports under docs/results",
                          description="Read the reports that `make results results-beyond results-short` write and "
-                                     "check each of issue 9's targets on each of its cases (elbow hidden from 1 s, "
+                                     "check each gap-filling target on each of its cases (elbow hidden from 1 s, "
                                      "knee and ankle hidden together, every solver within 1.5x of the best, moves at "
                                      "re-acquisition, the full-body frame's time). Runs nothing; prints the table "
                                      "and writes targets.md, targets.csv and a plot.")

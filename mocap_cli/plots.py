@@ -56,7 +56,7 @@ def move_ratio_plot(ratios: dict[str, np.ndarray], path: Path, title: str) -> No
     for name, r in ratios.items():
         x = np.sort(r)[::-1]
         ax.step(x, np.arange(1, len(x) + 1), where="post", label=name, lw=1.4)
-    ax.axvline(1.5, color="grey", ls="--", lw=1, label="1.5x (issue 9's bound)")
+    ax.axvline(1.5, color="grey", ls="--", lw=1, label="1.5x (the targets' bound)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("move / normal per-frame motion")
@@ -88,7 +88,7 @@ def targets_plot(checks, path: Path) -> None:
     ax.set_yticks([yi for yi, (_, c) in zip(y, rows) if c is not None],
                   [label for label, c in rows if c is not None], fontsize=6)
     ax.set_xlabel("figure / limit (met at 1 or under)")
-    ax.set_title(f"issue 9's targets: {sum(c.met for c in checks)} of {len(checks)} cases met", fontsize=9)
+    ax.set_title(f"the gap-filling targets: {sum(c.met for c in checks)} of {len(checks)} cases met", fontsize=9)
     ax.set_ylim(-0.6, len(rows) - 0.4)
     fig.tight_layout()
     fig.savefig(path)

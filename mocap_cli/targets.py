@@ -1,4 +1,4 @@
-"""`mocap eval targets`: issue 9's targets checked against the reports `make results results-beyond results-short`
+"""`mocap eval targets`: the gap-filling targets checked against the reports `make results results-beyond results-short`
 write under docs/results, so the figures in docs/results.md's table come from one place and cannot go stale unseen.
 
 Each target names its cases (a report and a joint) and its limits; the check reads only the reports' CSVs."""
@@ -86,8 +86,7 @@ def _made_by(report: str) -> str:
 def _read(results: Path, report: str, name: str) -> list[dict]:
     path = results / report / name
     if not path.is_file():
-        why = " (reports made before stop 46 have no transitions.csv)" if name == "transitions.csv" else ""
-        raise TargetsError(f"{path} is missing: `{_made_by(report)}` writes it{why}")
+        raise TargetsError(f"{path} is missing: `{_made_by(report)}` writes it")
     with open(path, newline="") as f:
         return list(csv.DictReader(f))
 

@@ -22,7 +22,7 @@ BLEND_X = 1.6783469900166612
 # take the wrist to 4-7 m/s); the Vicon take's held left wrist jumped 147 and 286 mm in a frame (18-34 m/s).
 SOURCE_JUMP_M_S = 10.0
 # A source seen again within this many frames (a flickering marker) gets its step from its last sighting, and
-# returning markers are met at that step (stop 45).
+# returning markers are met at that step.
 FLICKER_FRAMES = 5
 # Seconds between frames when the caller gives no capture times (the blend's spring needs them).
 DEFAULT_FRAME_S = 0.01
@@ -42,12 +42,11 @@ DEFAULT_FRAME_S = 0.01
 # 13-15 mm. Without the weight (a fixed ease over 0.2 s) the sprint was 31 mm; the miss of the raw fill
 # instead of the output's, the sprint 6.2; the course's own misses at returns learned too, 8.3.
 COURSE_K = 3.0
-# An estimate given up for a hold starts a course too (stop 29), on the estimate's last step; that step dies out
+# An estimate given up for a hold starts a course too, on the estimate's last step; that step dies out
 # with this time constant. A fill's step says less of where a limb goes than its markers' did, and an arm that
 # loses its estimate often does so slowing down: the Vicon take's left elbow (hidden from 1 s), its forearm's and
 # hand's markers lost for 15 frames at 2.8 s while the arm slowed from 24 to 5 mm a frame, went on at 25 mm a
-# frame and came 103 mm off, where the hold was 28-44 mm off (stop 44: 81 so; 0.1 s: 87; 0.025 s: 80, and the
-# kicking right knee's maximum 175 -> 186 mm, 181 so). Every course dying out so took dance1's ankle back from
+# frame and came 103 mm off, where the hold was 28-44 mm off. Every course dying out so took dance1's ankle back from
 # short gaps at 1.56x its normal step (1.41x): a loss of the markers keeps its course.
 HOLD_COURSE_S = 0.05
 ACCEL_FLOOR = 1.0       # m/s^2
@@ -214,15 +213,12 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     before_step = raw_vel[k].copy()  # (also the markers' last step, at a loss; the estimate's, given up)
     lost = s != LOCATED and was == LOCATED
     # an estimate given up for a hold, which knows nothing of where the joint went, is met like a loss: the
-    # output goes on along the estimate's course (stop 29: the Vicon take's kicking right knee, its shank's wand
-    # lost too, was 215 mm off after four held frames, then eased back from 260 mm); a course running goes on
+    # output goes on along the estimate's course; a course running goes on
     gave_up = s == HELD and was == ESTIMATED and since_loss[k] == math.inf
     found_or_lost = (s == LOCATED) != (was == LOCATED)
     jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
     # a fill that stepped out for one frame, under the jump's threshold, and is back where it was heading
-    # before that: not a jump, and the output goes on at the step it had before the spike (stop 29: the Vicon
-    # take's left elbow stepped 82 mm out at frame 172 and back; met as a jump, the output went on at the
-    # spike's step, 150 mm off for 25 frames)
+    # before that: not a jump, and the output goes on at the step it had before the spike
     spike = jumped and s == was and vnorm(raw - (prev_raw[k] + 2.0 * prev_vel[k])) <= SOURCE_JUMP_M_S * dt
     jumped = jumped and not spike
     # handed from one fill to another (estimated, held) without such a jump: the new fill's jump is taken into
@@ -269,12 +265,12 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
             # an estimate that jumps within itself has corrected itself (a rebuild whose partners changed), where a
             # held joint that jumps was taken up by another bone: its offset starts closing at once, at the step
             # cap's pace. Eased from rest, the Vicon take's left elbow went on 103 mm off for 0.1 s after its
-            # rebuild had come back to 4 mm in a 4-5 m/s swing (stop 44; 80 mm so)
+            # rebuild had come back to 4 mm in a 4-5 m/s swing
             offset_vel[k] = offset[k] * (-step / dt / vnorm(offset[k]))
         if found_or_lost and since <= FLICKER_FRAMES:
             _take_step(raw_vel[k], across, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
         elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
-            raw_vel[k] = 0.0  # each taken into the offset (stop 28: the Vicon take's kicking knee, 0.46 m in 5 frames)
+            raw_vel[k] = 0.0  # each taken into the offset
     else:
         if was != MISSING and not handed and not spike:  # (a hand-over's jump is not the source's step)
             _take_step(raw_vel[k], raw - last_raw[k], last_raw[k] - prev_raw[k], SOURCE_JUMP_M_S * dt)
@@ -305,11 +301,10 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         carried = False
         # a lone joint's course keeps its distances to its located neighbours, turning with them (an elbow swings
         # about the shoulder; its markers' straight course flies off the arm). Once one is lost it goes on
-        # straight from where it is. Stop 30, short gaps: dance2's elbows 9.5 / 9.6 -> 7.3 / 7.1 mm. Neighbours out
+        # straight from where it is. Neighbours out
         # of reach of those distances (skin that slid) leave a circle shrunk to a point on their line, which is not
-        # where the joint went (stop 35: the Vicon take's right upper arm stretched 233 -> 280 mm in 8 frames; lost
-        # for two, its shoulder's course jumped 36 mm onto that line). There the course moves with their line, as it
-        # lay against it the frame before (stop 39). Going on straight and pulled towards the line by at most the
+        # where the joint went. There the course moves with their line, as it
+        # lay against it the frame before. Going on straight and pulled towards the line by at most the
         # step cap, the Vicon take's kicking right foot, out of its ankle's and toe's reach for 9 frames as the kick
         # turned back, ran 200 mm ahead and then fell onto the circle in one frame: its markers came back at up to
         # 1.50x its own pace (1.15x now). A joint lost while its parent alone is located (an end joint, a hand or a
@@ -319,9 +314,8 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         # where the parent is the limb's root (the hip, the clavicle), which the trunk's skin markers put: the knee's
         # move where its markers went, lost with its ankle on short gaps, went 0.69 -> 1.04x its normal step on
         # dance2, over the spring alone's 1.01x, as the hip joint shook its sphere. That course also moves with the
-        # parent: its step is its markers' last step relative to the parent's then, plus the parent's now (stop 45: a
-        # hand or a toe stops with its forearm or foot, where its markers' step ran on; the Vicon take's real gaps,
-        # located joint-frames over 50 / 100 mm off their markers 62 / 7 -> 57 / 3). A course begun with the parent lost
+        # parent: its step is its markers' last step relative to the parent's then, plus the parent's now. A
+        # course begun with the parent lost
         # too is carried once the parent is located again, at its distance then (the left hand, lost with its wrist
         # for a frame at 172 and a frame longer itself: 57 -> 53); never the root's child (k 1), whose neighbours are
         # both given where both are located.
@@ -410,20 +404,19 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     estimate has not got: over a short gap it keeps the joint near its markers' last course. After a loss the
     output also stays on that course (the markers' last step, on and on), leaving it for the fill as
     course_weight says, which learns from the joint how fast its markers turn and how far its fill missed them
-    where they came back (``trust``); ``step`` caps that too (``course_on`` False: the spring alone, as until
-    stop 23). Markers that come back while the output is still leaving that course are met from the output as it
+    where they came back (``trust``); ``step`` caps that too. Markers that come back while the output is still
+    leaving that course are met from the output as it
     went (its own last step), not as the fill went; markers back within FLICKER_FRAMES of their last sighting are
-    met at their own step across the gap (stop 45). An estimate that leaves its course faster than
-    SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way (an estimate
-    that so jumps within itself has corrected itself: with ``step`` set, its offset closes from the first frame at
-    that pace, stop 44); one handed between fills (estimated, held) without such a jump has its jump taken into
-    the offset (since stop 25; until then it was not met). An estimate given up for a hold starts a course as a
-    loss does, its step dying out (HOLD_COURSE_S, since stop 44), and one back from a hold ends a course as
-    returning markers do (stop 29). The course of a lone joint between two located ones keeps its distances to
-    them, on their circle (stop 30); out of their reach, it moves with their line (stop 39). One whose parent
-    alone is located keeps its distance to it, unless that is the limb's root (stop 44), and moves with it: its step
-    is its markers' last step relative to the parent's then, plus the parent's now (stop 45). While a fill stands in,
-    the output stays within MAX_APART_M of it (stop 31). A flickering marker swings the offset back and forth by
+    met at their own step across the gap. An estimate that leaves its course faster than
+    SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way; one handed
+    between fills (estimated, held) without such a jump has its jump taken into
+    the offset. An estimate given up for a hold starts a course as a
+    loss does, its step dying out, and one back from a hold ends a course as
+    returning markers do. The course of a lone joint between two located ones keeps its distances to
+    them, on their circle; out of their reach, it moves with their line. One whose parent
+    alone is located keeps its distance to it, unless that is the limb's root, and moves with it: its step
+    is its markers' last step relative to the parent's then, plus the parent's now. While a fill stands in,
+    the output stays within MAX_APART_M of it. A flickering marker swings the offset back and forth by
     the two sources' difference: nothing builds up.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source

@@ -137,7 +137,7 @@ class BodyModel:
 def _fit(n, sx, sy, sxx_upper, sxy):
     """The ridge fit on the standardized features from the running sums: (means, SDs, the joint's mean,
     the Cholesky factor L of Z^T Z + RIDGE I, the coefficients). Written out in numba: with numpy and
-    LAPACK calls a refit took 400 us in a frame on stop 22's VM (an 81 x 81 inverse 350 us alone)."""
+    LAPACK calls a refit took 400 us in a frame on a slow VM (an 81 x 81 inverse 350 us alone)."""
     d = sx.shape[0]
     mu, y_mean = sx / n, sy / n
     sd = np.empty(d)

@@ -117,7 +117,7 @@ class LimbFiller:
         # Re-acquisition without a twitch (beyond the thesis): when a joint's markers come back, the
         # gap between where IK had it and where the markers are is closed by at most reacquire_step_m per
         # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
-        # Inertialization at both ends of a gap (issue 9, blend_half_life_s): a joint whose markers are lost
+        # Inertialization at both ends of a gap (blend_half_life_s): a joint whose markers are lost
         # goes on where it was heading, then eases into the estimate; one whose markers come back eases into
         # them. The offset dies out as a critically damped spring (mocap_core/blend.py). Short gaps, the
         # studio's usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every
@@ -130,7 +130,7 @@ class LimbFiller:
         self.swivel = swivel
         self.bend, self.bend_ok = np.zeros((n, n + 1, 2, 3)), np.zeros((n, n + 1, 2), bool)
         self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
-        # Bone lengths learned online (issue 9): each bone's mean length over the frames that located both
+        # Bone lengths learned online: each bone's mean length over the frames that located both
         # its joints (sum, count). Off, the swivel takes the lengths of the last whole frame: its marker
         # noise, and the stretch of a limb that straightened past its reach, then last the whole gap
         # (dance set walk2, left elbow hidden from 1 s: 23 -> 20 mm).
@@ -143,14 +143,14 @@ class LimbFiller:
         other_idx = None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]], dtype=np.int64)
         self.memory = LimbMemory(n, other_idx) if limb_memory else None
         self.no_recall = np.full((n, 3), np.nan)
-        # The body model (issue 9): a lone lost elbow or knee turned on its circle towards where a regression
+        # The body model: a lone lost elbow or knee turned on its circle towards where a regression
         # from the rest of the located body puts it (mocap_core.body_model). Dance set, eight arms, elbow hidden
         # from 1 s: dance2's 36 / 35 mm -> 29 / 31 (prototype).
         middle = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED]
         self.body_model = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) \
             if body_model and other_idx is not None and middle else None
         self.modelled, self.model_weight = np.full((n, 3), np.nan), np.zeros(n)
-        # The end model (issue 9's "a lost end effector is predicted from the rest of the body"): a limb lost from
+        # The end model (the "a lost end effector is predicted from the rest of the body"): a limb lost from
         # its first joint down (elbow, wrist and hand; knee, ankle and foot) has its end put where the same kind
         # of regression puts it, learned from the wrist's (ankle's) place from the shoulder (hip); the joints
         # between then aim at it. Algorithm 1 held the limb as it was relative to its parent.

@@ -9,9 +9,9 @@ metatarsals for its last second), and the knee and ankle were then held, up to 0
 One marker on the shank is still enough for the whole leg but one angle. The leg is two rigid bodies:
 the thigh turns about the hip joint centre and carries the knee's epicondyles, and the shank turns about
 the axis between them and carries the malleoli and the marker. Their shape is taken from the last frame
-the knee's epicondyles and the marker were all seen (bone lengths are constant, issue 9). The marker's
+the knee's epicondyles and the marker were all seen (bone lengths are constant). The marker's
 distance from the hip then fixes the knee's bend, and its direction all of the thigh's turn but the
-turn about the hip-marker line. That one is carried in the pelvis frame (issue 9's "swivel angle carried
+turn about the hip-marker line. That one is carried in the pelvis frame (the "swivel angle carried
 in its parent's frame"): the thigh turns with the pelvis, then as little as puts the marker where it is,
 then about the hip-marker line as keeps the knee's axis nearest its direction in the pelvis frame. (A
 leg that only bends, hip and knee, is then followed exactly, but near a straight knee: there the marker's
@@ -46,10 +46,8 @@ KNEE_ANKLE = ("FLE", "FME", "FAL", "TAM")
 MAX_BEND_STEP = np.radians(30.0)  # the knee's bend searched this far either side of the last frame's
 SEARCH_STEP = np.radians(1.0)     # first in these steps, then in tenths of them about the best
 BEND_PRICE_M = 0.001              # per radian away from the last bend: settles near-ties between two bends
-# A shank marker lost goes on at its last step for this many frames, and the leg with it (issue 9's "velocity
-# over short gaps"); after that the ankle, where it is seen or rebuilt, takes its place (stop 27: Vicon take,
-# right knee / ankle hidden from 1 s, 53 / 40 -> 42 / 39 mm; the wand's real gaps last up to 25 frames; with it,
-# a course of 0 / 3 / 12 frames gave 49 / 39, 51 / 46, 50 / 37), and
+# A shank marker lost goes on at its last step for this many frames, and the leg with it (the "velocity
+# over short gaps"); after that the ankle, where it is seen or rebuilt, takes its place, and
 # else the leg is left to the IK stage. In the Vicon take's kick the wand is lost for
 # a few frames at 8.40 s: right knee / ankle hidden from 1 s, 67 / 54 mm (max 465 / 656) with the leg held
 # there; 3 / 6 / 9 / 12 / 24 frames: 61 / 43, 59 / 38, 59 / 35, 63 / 37, 77 / 37 mm (max 363 / 440, 296 / 296,

@@ -26,7 +26,7 @@ from mocap_core.profiles import LandmarkMap
 # markers' rigid motion alone 10.1 / 3.9 / 6.3 / 2.6 / 3.2 (max 109 / 38 / 136 / 21 / 83). Hidden for 43 frames
 # (the longest real loss): 19.9 / 10.0 / 14.9 / 4.8 / 3.6 against 36.4 / 14.0 / 46.1 / 12.3 / 11.9 without a turn.
 # 5 of them, or only those within 0.2-0.3 m: worse on the toe (max 41-72 mm).
-# Each weighs by its nearness to the lost member (stop 39, kernels.nearness_weight): measured as above again,
+# Each weighs by its nearness to the lost member: measured as above again,
 # 7.7 / 3.8 / 6.0 / 2.7 / 1.9 mm (max 53 / 39 / 87 / 13 / 12) -> 7.6 / 3.4 / 5.4 / 2.3 / 1.7 (max 53 / 36 / 100 /
 # 12 / 10); for 43 frames 20.5 / 10.7 / 12.5 / 5.1 / 3.2 -> 20.0 / 9.8 / 11.0 / 4.6 / 2.9.
 NEIGHBOURS = 4

@@ -1,6 +1,6 @@
 """Rebuilding lost limb landmarks from the markers of their segment that are still seen.
 
-Beyond the thesis (issue 9's "use what is still visible: a joint's remaining markers"; the thesis's
+Beyond the thesis (the "use what is still visible: a joint's remaining markers"; the thesis's
 2018 code had a first version of it, SegmentTracking, facts section 8). The markers of one bone
 move as one rigid body, so a lost landmark is put where the best rigid motion (Kabsch) of its
 segment's seen markers, from the last frame they were seen with it, carries it:
@@ -111,10 +111,7 @@ LONE_PARTNERS = {"styloids": 3}  # a pair each rebuilt only while the other is s
 # The malleoli keep theirs to the shank's markers, not to the foot's: on the Vicon take the lateral one
 # keeps its distance from the shank's wand within 2 mm SD, from the metatarsals only within 10-13 mm SD
 # (ranges of 40-60 mm) as the foot flexes. The knee's epicondyles keep theirs to a thigh marker (the Vicon
-# set's LHIP / RHIP, 3-7 mm SD), not to the shank's wand. Stop 28, Vicon take, knee and ankle hidden from
-# 1 s (joints, studio options, with the blend's fix): left 36 / 20 -> 22 / 15 mm, right 42 / 39 -> 34 / 31; with the own
-# markers held as well, right 41 / 33 (landmarks); the forearm's own markers held too are better for the
-# elbow (Vicon left max 264 mm, 355 without them).
+# set's LHIP / RHIP, 3-7 mm SD), not to the shank's wand.
 ALSO_ON = {"forearm": (("HLE", "HME"), "upper_arm", True),
            "foot": (("FAL", "TAM"), "shank", False),
            "shank": (("FLE", "FME"), "thigh", False)}

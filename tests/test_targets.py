@@ -1,4 +1,4 @@
-"""`mocap eval targets`: issue 9's targets read from the reports, on made-up reports with known answers and on the
+"""`mocap eval targets`: the gap-filling targets read from the reports, on made-up reports with known answers and on the
 committed docs/results."""
 import csv
 import subprocess

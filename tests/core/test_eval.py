@@ -70,7 +70,7 @@ def test_eval_gaps_with_short_gaps(tmp_path):
 def test_what_eval_gaps_measures_for_what_it_hides():
     """Joints are measured as named (pelvis: its segment); landmarks alone, the joints they locate (a styloid: the
     wrist); a name that is neither, a joint no marker locates, and a landmark that locates none are refused,
-    saying why, and `mocap eval gaps` says so before it reads the take (it crashed on them before stop 43)."""
+    saying why, and `mocap eval gaps` says so before it reads the take."""
     assert measured_joints(["knee_l", "ankle_l"]) == ["knee_l", "ankle_l"]
     assert measured_joints(["pelvis"]) == ["pelvis", "spine0", "hip_l", "hip_r"]
     assert measured_joints(["elbow_l", "L_UOA"]) == ["elbow_l"]
@@ -169,8 +169,7 @@ def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
     assert list(rows) == ["thesis's method", "studio options without the blend", "studio options"]
     blend, without, thesis = rows["studio options"], rows["studio options without the blend"], rows["thesis's method"]
     assert int(blend["changes"]) > 500
-    # (stop 34: 3, 11 and 105; before its steady frames and kept partial landmarks the fill without the blend
-    # had 41, up to 9.9x, as a held hand swung with a flipped shoulder)
+    #
     assert int(blend["changes_over_1_5"]) < int(without["changes_over_1_5"]) < int(thesis["changes_over_1_5"]) / 5
     assert float(blend["changes_max"]) <= float(without["changes_max"]) < 3 < float(thesis["changes_max"])
     # beyond the joints' own pace (the actor's fast moves left out) the blend's few are almost all gone
@@ -178,15 +177,13 @@ def test_eval_real_gaps_on_a_take_with_real_gaps(tmp_path):
     assert float(blend["paced_max"]) <= float(blend["changes_max"])
     assert int(blend["filled_over_3"]) == 0 < int(thesis["filled_over_3"])
     # the bone frames a rig streams turn less at the fills than the thesis's method's, and far less with the
-    # blend's frames (stop 34: 23 and 21 turns over 3x and over 30 degrees, 116 and 114 without the blend, the
-    # thesis's method 137 and 121; 205 and 209 before that stop's steady frames), at a cost the sentence gives:
+    # blend's frames, at a cost the sentence gives:
     # located frames turned off their markers' while an offset eases out (924, 796 of them on the left arm,
     # whose wrist markers slide and flip its located frames)
     assert int(blend["turns_over_3"]) * 2 < int(without["turns_over_3"]) < int(thesis["turns_over_3"])
     assert int(blend["turns_over_30_deg"]) * 2 < int(without["turns_over_30_deg"]) < int(thesis["turns_over_30_deg"])
     assert 0 < int(blend["located_frames_over_30_deg"]) < 0.05 * 27744
-    # and it does not keep the output far off markers that are seen: 302 joint-frames over 100 mm, up to 0.78 m
-    # (a kicking foot), before stop 29 let it move at a quarter of the joint's own step; 210, 0.49 m since
+    # and it does not keep the output far off markers that are seen
     assert int(blend["located_over_100mm"]) < 250 and float(blend["located_off_max_m"]) < 0.6
     assert without["located_over_100mm"] == ""
     assert "located joint-frames" in (tmp_path / "real_gaps.md").read_text()

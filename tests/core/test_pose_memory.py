@@ -137,17 +137,15 @@ def test_dance1_knee_and_ankle_from_the_pose_memory():
 
 def test_walk1_knee_and_ankle_from_a_memory_of_two_seconds():
     """A walk in the same 28-marker set, knee and ankle hidden from 2 s to the end (3.85 s): 135 / 61 mm
-    with swivel and segment carry alone. With the toe's velocity and the lighter smoothing (stop 33) this leg
-    meets issue 9's 30 mm (28 / 23 mm; 31 / 26 with a fifth of the way a frame, which lagged the knee)."""
+    with swivel and segment carry alone. With the toe's velocity and the lighter smoothing this leg
+    meets the targets' 30 mm (28 / 23 mm; 31 / 26 with a fifth of the way a frame, which lagged the knee)."""
     (knee, ankle), (knee0, ankle0) = (_dance_gap("walk1", "l", m, 2.0, None) for m in (True, False))
     assert knee < 0.03 and ankle < 0.03, (knee, ankle)
     assert knee < 0.5 * knee0 and ankle < 0.7 * ankle0, (knee, ankle, knee0, ankle0)
 
 
-def test_walk2_knees_and_ankles_meet_issue_9s_target():
-    """walk2's legs hidden one at a time from 2 s to the end: the knees 36.9 / 34.5 mm before stop 37, when the
-    poses found were averaged, the velocity's search fell back on the other leg's poses by its own key, and the
-    recall was smoothed more."""
+def test_walk2_knees_and_ankles_meet_the_target():
+    """walk2's legs hidden one at a time from 2 s to the end."""
     for side in "lr":
         knee, ankle = _dance_gap("walk2", side, True, 2.0, None)
         assert knee < 0.03 and ankle < 0.03, (side, knee, ankle)
