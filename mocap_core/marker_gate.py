@@ -2,7 +2,7 @@
 
 A marker further from the origin than ``max_distance_m``, or one that moved faster than ``max_speed_m_s`` since it
 was last accepted, is taken as missing in that frame (a glitch of the cameras, a corrupt packet). The fastest
-marker in the shared recordings moves at 17 m/s (a karate strike), so the default of 50 m/s keeps every real
+marker in the shared recordings moves at 17 m/s (a strike), so the default of 50 m/s keeps every real
 motion. A marker whose new track goes on consistently is accepted again on the next frame: it is checked against
 where it was last rejected too, so a wrong first position (a glitch in the first frame) is left after one frame.
 Every stage that learns from the markers sits behind this gate (the hip stage, the fit), so one glitched frame

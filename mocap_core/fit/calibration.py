@@ -128,11 +128,6 @@ def refine(subject: Subject, markers: np.ndarray, labels: list[str], rate_hz: fl
     frame, so each marker is judged on every bone over the same frames, and on frames that its neighbours'
     markers fix (the localization's frames lean on a few landmarks each)."""
     from mocap_core.fit.fitter import SkeletonFitter
-    fitter = SkeletonFitter(subject, labels, fit_settings, rate_hz=rate_hz)
-    n = len(markers)
-    P, R = np.full((n, len(JOINTS), 3), np.nan), np.full((n, len(JOINTS), 3, 3), np.nan)
-    for f in range(n):
-        out = fitter.fit(markers[f])
-        P[f], R[f] = out.positions, out.frames
+    P, R, _, _ = SkeletonFitter(subject, labels, fit_settings, rate_hz=rate_hz).fit_all(markers)
     bone, c, spread = marker_offsets(markers, P, R, subject.known, s)
     return replace(subject, marker_bone=bone, marker_offsets=c, spread_m=spread)

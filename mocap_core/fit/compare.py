@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocap_core.experiments import real_gap_moves
+from mocap_core.experiments import localize_take, real_gap_moves
 from mocap_core.fit.take import fit_take
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import Profile
@@ -73,8 +73,7 @@ def bone_lengths(positions: np.ndarray) -> np.ndarray:
 def references(rec: Recording, profile: Profile) -> dict[str, np.ndarray]:
     """Each method's solve of the complete take: the localization for the thesis's method and the studio
     options (nothing to fill), the fit calibrated on the complete take for the fit."""
-    pipe = SkeletonPipeline(profile, rec.labels, fill_gaps=False)
-    located = np.concatenate([c.positions for c in pipe.run(rec.positions)])
+    located = localize_take(rec, profile)[0]
     return {"thesis": located, "studio": located, NO_TRACKING: located,
             "fit": solve("fit", rec.positions, rec, profile)[0]}
 

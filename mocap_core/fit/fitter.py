@@ -19,6 +19,7 @@ import numpy as np
 from mocap_core.fit.calibration import ROTATING
 from mocap_core.fit.kernel import fit_pose, forward, limit_locals
 from mocap_core.fit.subject import Subject
+from mocap_core.geometry import rigid_fit
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.skeleton import N_JOINTS, PARENT_INDEX, Status
 
@@ -64,14 +65,6 @@ def _chains() -> np.ndarray:
 
 
 CHAINS = _chains()
-
-
-def rigid_fit(local: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The rotation and origin that carry points ``local`` (n, 3) onto ``world`` (Kabsch)."""
-    lc, wc = local.mean(axis=0), world.mean(axis=0)
-    u, _, vt = np.linalg.svd((world - wc).T @ (local - lc))
-    R = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
-    return R, wc - R @ lc
 SLOT = np.where(ROTATING, 3 + 3 * (np.cumsum(ROTATING) - 1), -1).astype(np.int64)
 
 
@@ -143,6 +136,19 @@ class SkeletonFitter:
         self.velocity = self.root - before
         return self._frame(residual, iterations)
 
+    def fit_all(self, markers: np.ndarray, progress=None):
+        """Every frame of a take (F, M, 3) in order -> positions (F, J, 3), frames (F, J, 3, 3), status (F, J) and each
+        frame's residual (F,); ``progress(1)`` after each frame, if given."""
+        n = len(markers)
+        pos, frames = np.empty((n, N_JOINTS, 3)), np.empty((n, N_JOINTS, 3, 3))
+        status, residual = np.empty((n, N_JOINTS), np.uint8), np.empty(n)
+        for f in range(n):
+            out = self.fit(markers[f])
+            pos[f], frames[f], status[f], residual[f] = out.positions, out.frames, out.status, out.residual_m
+            if progress is not None:
+                progress(1)
+        return pos, frames, status, residual
+
     def _start(self, x: np.ndarray) -> bool:
         """The first pose: the subject at rest (every bone at its typical rotation in its parent's frame) placed by
         a rigid fit of the seen markers on the pelvis and the bones it carries (three at least), then a long
@@ -157,7 +163,7 @@ class SkeletonFitter:
         if use.sum() < 3:
             return False
         rest = P[self.bone[use]] + np.einsum("mab,mb->ma", self.R[self.bone[use]], self.offsets_m[use])
-        turn, self.root = rigid_fit(rest, x[use])
+        turn, self.root = rigid_fit(rest, x[use], np.ones(int(use.sum())))
         self.R = np.einsum("ab,jbc->jac", turn, self.R)
         # least squares first (a far start would have the robust loss ignore whole limbs), then robust
         self._solve(x, self.root.copy(), self._locals(), self.settings.start_iterations, weak=True, robust_m=1.0)

@@ -20,12 +20,5 @@ def fit_take(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz: 
     if subject is None:
         subject = calibrate(markers, labels, profile, rate_hz, calibration, settings)
     fitter = SkeletonFitter(subject, list(profile.columns(labels)), settings, rate_hz=rate_hz)
-    n = len(markers)
-    pos, frames = np.empty((n, len(subject.offsets), 3)), np.empty((n, len(subject.offsets), 3, 3))
-    status, residual = np.empty((n, len(subject.offsets)), np.uint8), np.empty(n)
-    for f in range(n):
-        out = fitter.fit(markers[f])
-        pos[f], frames[f], status[f], residual[f] = out.positions, out.frames, out.status, out.residual_m
-        if progress is not None:
-            progress(1)
+    pos, frames, status, residual = fitter.fit_all(markers, progress)
     return SolvedChunk(0, pos, frames, status), residual, subject
