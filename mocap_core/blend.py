@@ -18,8 +18,8 @@ from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vecto
 
 # A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.
 BLEND_X = 1.6783469900166612
-# Faster than this, an estimate has jumped to another source (no joint moves so fast: the karate kata's strikes
-# take the wrist to 4-7 m/s); the Vicon take's held left wrist jumped 147 and 286 mm in a frame (18-34 m/s).
+# Faster than this, an estimate has jumped to another source: no joint of the shared recordings moves so fast
+# (strikes take a wrist to 4-7 m/s), while a held joint handed to another fill jumps at 18-34 m/s.
 SOURCE_JUMP_M_S = 10.0
 # A source seen again within this many frames (a flickering marker) gets its step from its last sighting, and
 # returning markers are met at that step.
@@ -30,42 +30,23 @@ DEFAULT_FRAME_S = 0.01
 # less than the fill (the dead blending of game engines, weighted): by w = c^2 / (c^2 + s^2), where
 # c = COURSE_K * |a| t^2 / 2 is how far the course may have strayed t seconds on (|a| the joint's mean
 # acceleration while located, at least ACCEL_FLOOR) and s the fill's RMS miss where the markers came back
-# (FILL_SD_PRIOR counting as one such), the spring's offset included. Both are learned per joint: on
-# dance2's short gaps the pose memory's knee misses by 42 mm RMS and stays on its course longer, the
-# elbows by 21-24 mm, the sprint's rebuilt elbow by 10 mm (its arm accelerating at 13 m/s^2).
-# The spring's offset alone gave the course up at once, at the fill's own velocity: on dance2's knee and
-# ankle (0.1 s hidden in every 0.5 s) a fill that moved 30 mm a frame where the markers moved 5.
-# Short gaps, the studio options (prototype): knee+ankle on dance2 left 17.9 / 17.8 mm mean -> 11.1 /
-# 10.4, right 15.6 / 15.7 -> 10.0 / 10.7, dance1 left 13.5 / 13.5 -> 11.3 / 8.6; dance2's elbows 9.1 /
-# 10.4 -> 9.5 / 9.6; the sprint's elbow 4.0 -> 5.6 (its arms swing hardest; the spring's offset alone
-# keeps a rebuild's steady bias better). COURSE_K 1: dance2's elbows 13 mm, the sprint 12; 10: the knees
-# 13-15 mm. Without the weight (a fixed ease over 0.2 s) the sprint was 31 mm; the miss of the raw fill
-# instead of the output's, the sprint 6.2; the course's own misses at returns learned too, 8.3.
+# (FILL_SD_PRIOR counting as one such), the spring's offset included. Both are learned per joint, from the
+# take's own frames. The spring's offset alone gives the course up at once, at the fill's own velocity.
 COURSE_K = 3.0
 # An estimate given up for a hold starts a course too, on the estimate's last step; that step dies out
-# with this time constant. A fill's step says less of where a limb goes than its markers' did, and an arm that
-# loses its estimate often does so slowing down: the Vicon take's left elbow (hidden from 1 s), its forearm's and
-# hand's markers lost for 15 frames at 2.8 s while the arm slowed from 24 to 5 mm a frame, went on at 25 mm a
-# frame and came 103 mm off, where the hold was 28-44 mm off. Every course dying out so took dance1's ankle back from
-# short gaps at 1.56x its normal step (1.41x): a loss of the markers keeps its course.
+# with this time constant: a fill's step says less of where a limb goes than its markers' did, and an arm that
+# loses its estimate often does so slowing down. A loss of the markers keeps its course.
 HOLD_COURSE_S = 0.05
 ACCEL_FLOOR = 1.0       # m/s^2
 FILL_SD_PRIOR = 0.01    # metres
 # reacquire_step_m caps how far the blend moves the output off its source in a frame; a source moving over
-# four times that may be left or met at a quarter of its own step. A kicking foot lost at 10 mm a frame, its
-# fill running on at 60, fell 0.75 m behind at the 10 mm cap, and then took 0.65 s to meet its markers (stop
-# 29: the Vicon take's right foot at frame 534). A half: the Vicon take's moves of filled joints over 1.5x
-# their normal went 24 -> 101 and dance1's ankle came back at 1.56x its normal step on short gaps; a
-# quarter: 68, and 1.47x as before.
+# four times that may be left or met at a quarter of its own step, so a fast joint (a kicking foot) does not
+# fall behind its fill and take long to meet its markers again.
 PACE_SHARE = 0.25
 EASED = 0.999           # the weight at which the fill is taken whole
-# While a fill stands in for the markers, the output stays within this of it. The markers' course runs on
-# straight at their last step, and the step cap lets the output leave it at 10 mm a frame: a hand lost in a
-# strike at 65 mm a frame (karate, a whole arm hidden 1 s in every 2 s) flew 1.2 m off its held fill in 0.2 s,
-# and the offsets that came back with it, closed at the same cap, piled up gap after gap (2.0 m off on average,
-# 7.1 m at worst; dance2's hand 1.8 / 4.6 m). At 0.5 m: 0.23 / 0.84 m and 0.43 / 1.06 m, and not one figure of
-# the short-gap, long-gap or real-gap tables moved (it never binds there); at 0.3 m the Vicon take's kicking
-# ankle, whose held fill is the one that is wrong, went 117 -> 214 mm at worst.
+# While a fill stands in for the markers, the output stays within this of it: the markers' course runs on
+# straight at their last step, and a hand lost in a fast strike would otherwise fly far off its held fill, with
+# the offsets that come back with it piling up gap after gap. It never binds on the shared recordings' tables.
 MAX_APART_M = 0.5
 # BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
 # where the markers came back and how many; frames located in a row.
