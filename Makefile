@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean golden results results-blend results-beyond results-short targets checks results-rigid
+.PHONY: demo test setup bench clean bvh-blender golden results results-blend results-beyond results-short targets checks results-rigid
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -29,6 +29,14 @@ test: $(STAMP) $(CHROMIUM_STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/transport.py
+
+# A BVH of the karate take imported by Blender headless (Debian's blender; not run by CI): prints the frame count
+# and each limb's rest direction, so a T-pose shows as arms "lateral" and legs "down".
+bvh-blender: $(STAMP)
+	command -v blender >/dev/null 2>&1 || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq blender; }
+	$(BIN)/mocap solve ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 --bvh-out /tmp/mocap-karate.bvh \
+		--bvh-names mixamo --quiet
+	blender -b --factory-startup --python scripts/blender_bvh_check.py -- /tmp/mocap-karate.bvh 2>&1 | grep -v "^Blender\|^Read\|^$$"
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis

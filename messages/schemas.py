@@ -1,8 +1,9 @@
 """Pydantic schemas of every topic (DESIGN "Topics and messages").
 
 Conventions shared by all messages:
-- positions are float32 metres in the world frame of the source; occluded markers and missing
-  joints are NaN;
+- positions are float32 metres in the world frame of the source, right-handed; the header's
+  ``up_axis`` says which axis is up, set by the source and carried along (mocap_core.world);
+  occluded markers and missing joints are NaN;
 - quaternions are float32 in scalar-last order ``(x, y, z, w)`` (scipy, Unity and the thesis code
   use the same order);
 - every message starts with a :class:`Header`. ``schema``/``version`` identify the model,
@@ -32,6 +33,7 @@ class Header(BaseModel):
     frame: int = 0
     capture_time_s: float = 0.0
     entry_time_ns: int = 0
+    up_axis: Literal["", "+x", "-x", "+y", "-y", "+z", "-z"] = ""   # the source's world (mocap_core.world); "" = not said
 
 
 class Message(BaseModel):
@@ -44,21 +46,21 @@ class Message(BaseModel):
     header: Header
 
     @classmethod
-    def make_header(cls, frame: int = 0, capture_time_s: float = 0.0, entry_time_ns: int = 0) -> Header:
+    def make_header(cls, frame: int = 0, capture_time_s: float = 0.0, entry_time_ns: int = 0,
+                    up_axis: str = "") -> Header:
         return Header(schema=cls.SCHEMA, version=cls.VERSION, frame=frame,
-                      capture_time_s=capture_time_s, entry_time_ns=entry_time_ns)
+                      capture_time_s=capture_time_s, entry_time_ns=entry_time_ns, up_axis=up_axis)
 
     # The schema name and version are checked by the codec before validation (messages/codec.py) and
     # stamped by the runtime on publish, so no model validator repeats it on the 20 us hot path.
 
 
 class MarkerSet(Message):
-    """The labels and metadata of a marker stream (topic ``markers/set``)."""
+    """The labels and metadata of a marker stream (topic ``markers/set``); the up axis is the header's."""
 
     SCHEMA: ClassVar[str] = "mocap.MarkerSet"
     labels: list[str]
     units: Literal["m"] = "m"
-    up_axis: Literal["x", "y", "z"] = "z"
     rate_hz: float
     source: str = ""
 

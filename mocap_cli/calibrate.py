@@ -6,7 +6,7 @@ import logging
 import numpy as np
 
 from mocap_core.fit.calibration import calibrate
-from mocap_core.profiles import load_profile
+from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import JOINTS
 
@@ -20,7 +20,7 @@ def add_parser(sub) -> None:
                                    "pose needed), and write a subject file for `mocap solve --subject` and the "
                                    "skeleton_fit node.")
     s.add_argument("file", help="recording: .c3d, .trc or .mat (file.mat:take picks a take)")
-    s.add_argument("--profile", required=True, help="marker-set profile: a name from profiles/ or a YAML path")
+    s.add_argument("--profile", default=AUTO, help=PROFILE_HELP)
     s.add_argument("-o", "--out", required=True, help="subject file to write (YAML)")
     s.add_argument("--seconds", type=float, help="learn from the first SECONDS only (default: the whole take)")
     s.set_defaults(func=run)
@@ -30,7 +30,7 @@ def run(args) -> int:
     rec = read_recording(args.file)
     if args.seconds:
         rec = rec.slice(0, max(1, int(args.seconds * rec.rate_hz)))
-    profile = load_profile(args.profile)
+    profile = profile_for(args.profile, rec.labels, log)
     subject = calibrate(rec.positions, rec.labels, profile, rec.rate_hz)
     subject.save(args.out)
     lengths = subject.lengths()

@@ -4,7 +4,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from mocap_core.profiles import load_profile
+from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
 from mocap_core.recordings import Recording, read_recording
 from mocap_core.take_check import (FLOOR_M, TOLERANCE, MarkerGaps, Stretch, marker_gaps, rigid_pairs, spacing_faults,
                                    used_markers)
@@ -23,7 +23,7 @@ def add_parser(sub) -> None:
                                    "seen, so a fill near such a marker can be no better than it. Writes check.md and "
                                    "check.png (each faulty pair's distance over time).")
     s.add_argument("file", help="recording: .c3d, .trc, .mat (file.mat:take picks a take) or an MCAP bag")
-    s.add_argument("--profile", required=True, help="marker-set profile: a name from profiles/ or a YAML path")
+    s.add_argument("--profile", default=AUTO, help=PROFILE_HELP)
     s.add_argument("--report", default="reports/check", help="directory for check.md and check.png")
     s.add_argument("--no-plots", action="store_true")
     s.set_defaults(func=run)
@@ -31,7 +31,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     rec = read_recording(args.file)
-    profile = load_profile(args.profile)
+    profile = profile_for(args.profile, rec.labels, log)
     profile.resolve(rec.labels)  # a label the profile needs and the take lacks is an error here, as in solve
     gaps = [g for g in marker_gaps(rec.positions, used_markers(profile, rec.labels), rec.rate_hz) if g.lost]
     faults = spacing_faults(rec.positions, rigid_pairs(profile, rec.labels), rec.rate_hz)

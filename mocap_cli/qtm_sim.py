@@ -12,6 +12,7 @@ a marker for a range of frames (repeatable).
 """
 from __future__ import annotations
 
+import argparse
 import asyncio
 import logging
 import signal
@@ -22,7 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mocap_core import qtm_protocol as qp
+from mocap_core.profiles import detect_profile
 from mocap_core.recordings import Recording, read_recording
+from mocap_core.world import DEFAULT_UP, normalize_up
 
 log = logging.getLogger("mocap.qtm_sim")
 SLOW_CLIENT_BYTES = 8 * 1024 * 1024  # a client this far behind is dropped rather than slowing the others
@@ -46,7 +49,7 @@ class Client:
 
 
 class QtmEmulator:
-    def __init__(self, rec: Recording, rate_hz: float | None = None, loop: bool = False, up_axis: str = "+Z",
+    def __init__(self, rec: Recording, rate_hz: float | None = None, loop: bool = False, up_axis: str = DEFAULT_UP,
                  faults: Faults | None = None):
         self.rec = rec
         self.rate = rate_hz or rec.rate_hz
@@ -206,7 +209,7 @@ class QtmEmulator:
                      qp.Event.RT_FROM_FILE_STARTED if self.running else qp.Event.CONNECTED)
             self.send(c, qp.event_packet(state))
         elif cmd == "getparameters":
-            xml = qp.parameters_xml(args, self.rec.labels, self.rec.rate_hz, self.up_axis,
+            xml = qp.parameters_xml(args, self.rec.labels, self.rec.rate_hz, self.up_axis.upper(),
                                     self.rec.n_frames / self.rec.rate_hz)
             self.reply(c, xml, qp.PacketType.XML)
         elif cmd == "getcurrentframe":
@@ -272,13 +275,15 @@ async def serve(emulator: QtmEmulator, host: str, port: int, ready_file: str | N
 
 def add_parser(sub) -> None:
     s = sub.add_parser("qtm-sim", help="QTM real-time server replaying a recording",
-                       description=__doc__, formatter_class=__import__("argparse").RawDescriptionHelpFormatter)
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("file", help="recording: .c3d, .trc or .mat (file.mat:take)")
     s.add_argument("--host", default="127.0.0.1", help="address to listen on (default loopback only)")
     s.add_argument("--port", type=int, default=qp.DEFAULT_PORT, help="TCP port (default 22223; 0 = any free port)")
     s.add_argument("--rate", type=float, help="replay rate in Hz (default: the recording's)")
     s.add_argument("--loop", action="store_true", help="start again at the end of the take")
-    s.add_argument("--up-axis", default="+Z", choices=["+X", "-X", "+Y", "-Y", "+Z", "-Z"])
+    s.add_argument("--up-axis", type=_up_axis, metavar="AXIS",
+                   help="the AxisUpwards to announce (+Z, -Y, ...; default: the recording's, from the file or "
+                        "from the shipped profile its labels fit)")
     s.add_argument("--ready-file", help="write the bound port here once listening (for scripts and tests)")
     s.add_argument("--drop-after", type=int, default=0, metavar="N", help="fault: close each client after N frames")
     s.add_argument("--stall-at", type=int, default=-1, metavar="FRAME", help="fault: freeze the clock at this frame")
@@ -299,9 +304,24 @@ def run(args) -> int:
         hide.append((label, first, last))
     rec = read_recording(args.file)
     faults = Faults(args.drop_after, args.stall_at, args.stall_s, hide)
-    emulator = QtmEmulator(rec, args.rate, args.loop, args.up_axis, faults)
+    emulator = QtmEmulator(rec, args.rate, args.loop, args.up_axis or recording_up_axis(rec), faults)
     asyncio.run(serve(emulator, args.host, args.port, args.ready_file))
     return 0
+
+
+def _up_axis(text: str) -> str:
+    try:
+        return normalize_up(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def recording_up_axis(rec: Recording) -> str:
+    """The recording's up axis: the file's word, else the shipped profile its labels fit, else QTM's default."""
+    if rec.meta.get("up_axis"):
+        return rec.meta["up_axis"]
+    profile = detect_profile(rec.labels)
+    return profile.up_axis if profile else DEFAULT_UP
 
 
 def start_emulator(take: str, *args: str, cwd: str | None = None):

@@ -6,12 +6,12 @@ import time
 
 from tqdm import tqdm
 
-from mocap_core.bvh import BvhWriter
+from mocap_core.bvh import NAMINGS, BvhWriter
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
-from mocap_core.profiles import load_profile
+from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import Status
 
@@ -23,7 +23,7 @@ def add_parser(sub) -> None:
                        description="Read a C3D/TRC/MAT recording, locate the joints, fill gaps with IK and "
                                    "write the joints CSV (DESIGN 'Joints CSV').")
     s.add_argument("file", help="recording: .c3d, .trc or .mat (file.mat:take picks a take)")
-    s.add_argument("--profile", required=True, help="marker-set profile: a name from profiles/ or a YAML path")
+    s.add_argument("--profile", default=AUTO, help=PROFILE_HELP)
     s.add_argument("--solver", default="ccd", choices=sorted(SOLVERS), help="IK solver for gaps (default ccd)")
     s.add_argument("--no-constraints", action="store_true", help="solve without joint limits")
     s.add_argument("--no-ik", action="store_true",
@@ -40,7 +40,9 @@ def add_parser(sub) -> None:
     s.add_argument("--max-iterations", type=int, default=140)
     s.add_argument("--stop-distance", type=float, default=0.01, help="IK stop distance in metres")
     s.add_argument("--joints-out", help="output joints CSV")
-    s.add_argument("--bvh-out", help="output BVH (Y up, metres; see docs/graph.md)")
+    s.add_argument("--bvh-out", help="output BVH (Y up, metres, T-pose rest; see docs/graph.md)")
+    s.add_argument("--bvh-names", choices=sorted(NAMINGS), default="mocap",
+                   help="joint names in the BVH: the skeleton model's, or a common rig's (default mocap)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=run)
 
@@ -49,7 +51,7 @@ def run(args) -> int:
     if not args.joints_out and not args.bvh_out:
         raise SystemExit("mocap solve: give --joints-out OUT.csv and/or --bvh-out OUT.bvh")
     rec = read_recording(args.file)
-    profile = load_profile(args.profile)
+    profile = profile_for(args.profile, rec.labels, log)
     if args.fit or args.subject:
         if args.thesis or args.no_ik:
             raise SystemExit("mocap solve: --fit/--subject is a method of its own; drop --thesis/--no-ik")
@@ -82,7 +84,8 @@ def _write(args, rec, profile, chunks) -> int:
     counts = {s: 0 for s in Status}
     t0 = time.perf_counter()
     out = JointsCsvWriter(args.joints_out) if args.joints_out else None
-    bvh = BvhWriter(args.bvh_out, rec.rate_hz, profile.up_axis) if args.bvh_out else None
+    up = rec.meta.get("up_axis") or profile.up_axis
+    bvh = BvhWriter(args.bvh_out, rec.rate_hz, up, names=args.bvh_names) if args.bvh_out else None
     with tqdm(total=rec.n_frames, unit="frame", disable=args.quiet,
               desc=f"solving {rec.source.split('/')[-1]}") as bar:
         for chunk in chunks:

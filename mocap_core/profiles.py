@@ -5,7 +5,7 @@ A profile is a YAML file (see profiles/*.yaml and the README's "Your own marker 
 ```yaml
 name: cmu41
 description: CMU 41-marker Vicon set
-up_axis: z              # the recording's vertical axis (x, y or z); outputs use it
+up_axis: z              # the vertical axis (+z, -y, ...) of recordings that do not say it themselves
 strip_prefixes: true    # "male:LFWT" -> "LFWT" (actor/subject prefixes)
 landmarks:              # PAF landmark -> one label, or mean(A, B, ...)
   SACR: mean(LBWT, RBWT)
@@ -25,11 +25,12 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from mocap_core.world import DEFAULT_UP, normalize_up
 
 SIDES = ("L", "R")
 _SIDED = ("SAE", "HLE", "HME", "UOA", "RSP", "USP", "HM2", "PAS", "FLE", "FME", "TTC", "FAL", "TAM", "FCC", "FM2",
@@ -64,13 +65,18 @@ class Profile(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str
     description: str = ""
-    up_axis: Literal["x", "y", "z"] = "z"
+    up_axis: str = DEFAULT_UP  # for recordings that do not say it (QTM and bags do)
     strip_prefixes: bool = True
     landmarks: dict[str, str]
     tracking: dict[str, list[str]] = {}  # segment (L_forearm, ...) -> labels of markers on that bone
     body: BodyMeasurements = BodyMeasurements()
     source_file: str = ""
     lines: dict[str, int] = {}  # landmark -> line in the YAML file, for error messages
+
+    @field_validator("up_axis")
+    @classmethod
+    def _up(cls, v: str) -> str:
+        return normalize_up(v)
 
     def where(self, landmark: str | None = None) -> str:
         line = self.lines.get(landmark) if landmark else None
@@ -196,3 +202,44 @@ def load_profile(name_or_path: str | Path) -> Profile:
             raise ProfileError(f"{profile.where()}: unknown tracking segment {segment!r} "
                                f"(segments: {', '.join(TRACKING_SEGMENTS)})")
     return profile
+
+
+AUTO = "auto"
+
+
+PROFILE_HELP = ("marker-set profile: a name from profiles/ or a YAML path (default auto: the shipped one the "
+                "labels fit)")
+
+
+def profile_for(name_or_path: str | None, labels: list[str], log=None) -> Profile:
+    """``load_profile``, or with "auto" (or None) the shipped profile these labels fit (``detect_profile``),
+    named in ``log`` when given."""
+    if name_or_path not in (AUTO, None):
+        return load_profile(name_or_path)
+    profile = detect_profile(labels)
+    if profile is not None and log is not None:
+        log.info("profile auto: %s fits the labels (another: --profile NAME or a YAML path)", profile.name)
+    if profile is None:
+        shown = ", ".join(labels[:30]) + (" ..." if len(labels) > 30 else "")
+        known = ", ".join(sorted(p.stem for p in PROFILE_DIR.glob("*.yaml")))
+        raise ProfileError(f"no shipped profile fits these labels ({shown}); shipped: {known}. Write one for "
+                           f"your marker set (README, 'Your own marker set') and name it in the profile param")
+    return profile
+
+
+def detect_profile(labels: list[str]) -> Profile | None:
+    """The shipped profile that fits these labels: of those whose every landmark is in the stream, the
+    one that uses the most labels. None when no shipped profile fits."""
+    best, best_used = None, 0
+    for path in sorted(PROFILE_DIR.glob("*.yaml")):
+        profile = load_profile(path)
+        try:
+            profile.resolve(labels)
+        except ProfileError:
+            continue
+        index = profile.columns(labels)
+        used = len({n for lm in profile.landmarks for n in profile.markers_of(lm)}
+                   | {n for names in profile.tracking.values() for n in names if n in index})
+        if used > best_used:
+            best, best_used = profile, used
+    return best

@@ -25,7 +25,7 @@ class Recording:
     rate_hz: float
     source: str = ""
     first_frame: int = 0
-    meta: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)   # "up_axis" where the file says it (mocap_core.world)
 
     @property
     def n_frames(self) -> int:
@@ -213,4 +213,5 @@ def read_bag_markers(path: Path, topic: str = "markers/raw") -> Recording:
     times = np.array([f.header.capture_time_s for f in frames])
     rate = 1.0 / float(np.median(np.diff(times))) if len(times) > 1 else 100.0
     pos = np.stack([f.positions for f in frames]).astype(np.float32)
-    return Recording(list(labels), pos, round(rate, 3), str(path), int(frames[0].header.frame))
+    meta = {"up_axis": frames[0].header.up_axis} if frames[0].header.up_axis else {}
+    return Recording(list(labels), pos, round(rate, 3), str(path), int(frames[0].header.frame), meta)

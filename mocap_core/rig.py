@@ -21,6 +21,7 @@ import numpy as np
 
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 from mocap_core.skeleton import INDEX, PARENT
+from mocap_core.world import to_canonical
 
 # (Unity HumanBodyBones name, our joint, parent rig bone)
 UNITY_HUMANOID: tuple[tuple[str, str, str | None], ...] = (
@@ -51,15 +52,6 @@ BONES = tuple(b for b, _, _ in UNITY_HUMANOID)
 BONE_JOINT = np.array([INDEX[j] for _, j, _ in UNITY_HUMANOID])
 BONE_PARENT = np.array([-1 if p is None else BONES.index(p) for _, _, p in UNITY_HUMANOID])
 FLIP_Z = np.diag([1.0, 1.0, -1.0])
-
-
-def to_canonical(up_axis: str) -> np.ndarray:
-    """Rotation from a right-handed source world with the given up axis to right-handed Y-up."""
-    if up_axis == "y":
-        return np.eye(3)
-    if up_axis == "z":
-        return np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # (x, y, z) -> (x, z, -y)
-    return np.array([[0, 1.0, 0], [1, 0, 0], [0, 0, -1]])      # x up: (x, y, z) -> (y, x, -z)
 
 
 def t_pose_landmarks() -> np.ndarray:
@@ -101,11 +93,31 @@ def t_pose_landmarks() -> np.ndarray:
 
 
 @lru_cache(maxsize=1)
-def rest_frames() -> np.ndarray:
-    """Bone frames (J, 3, 3) of the T-pose, canonical frame."""
+def _t_pose():
     from mocap_core.localization import Localizer
 
-    return Localizer().localize(t_pose_landmarks()).frames[0]
+    return Localizer().localize(t_pose_landmarks())
+
+
+def rest_frames() -> np.ndarray:
+    """Bone frames (J, 3, 3) of the T-pose, canonical frame."""
+    return _t_pose().frames[0]
+
+
+def t_pose_positions() -> np.ndarray:
+    """Joint positions (J, 3) of the T-pose, canonical frame."""
+    return _t_pose().positions[0]
+
+
+@lru_cache(maxsize=1)
+def default_rig_offsets() -> np.ndarray:
+    """The default character's bones (B, 3), Unity frame: each bone's offset from its parent rig bone in
+    the T-pose (where every world rotation is the identity, so local offsets are world differences). A
+    1.75 m humanoid: the proportions a receiver's character keeps when positions come from the rig."""
+    p = FLIP_Z @ t_pose_positions()[BONE_JOINT].T
+    out = (p - p[:, _PARENT_OF]).T
+    out[~_HAS_PARENT] = 0.0
+    return out
 
 
 def rig_world_rotations(frames_src: np.ndarray, up_axis: str) -> np.ndarray:

@@ -140,7 +140,8 @@ def running_take(seconds: float = 20.0, rate_hz: float = 200.0, seed: int = 0):
             start = int(rng.integers(0, n))
             hidden[start:start + int(rng.uniform(0.05, 0.3) * rate_hz), k] = True
     pos[hidden] = np.nan
-    rec = Recording(list(LABELS), pos.astype(np.float32), float(rate_hz), f"synthetic:running(seed={seed})")
+    rec = Recording(list(LABELS), pos.astype(np.float32), float(rate_hz), f"synthetic:running(seed={seed})",
+                    meta={"up_axis": "+z"})
     return rec, truth
 
 

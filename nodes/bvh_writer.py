@@ -8,7 +8,8 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import SkeletonFrame
-from mocap_core.bvh import BvhWriter
+from mocap_core.bvh import NAMINGS, BvhWriter
+from mocap_core.world import DEFAULT_UP
 from nodes.bags import free_piece
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message
@@ -18,7 +19,7 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     path: str
     rate_hz: float = Field(120.0, gt=0, description="the capture rate (BVH frame time)")
-    up_axis: Literal["x", "y", "z"] = "z"
+    names: Literal[tuple(NAMINGS)] = Field("mocap", description="joint names: the skeleton model's or a common rig's")
 
 
 class BvhWriterNode(Node):
@@ -27,15 +28,18 @@ class BvhWriterNode(Node):
     subscribes = {"skeleton/solved": SkeletonFrame}
 
     def setup(self) -> None:
-        path = free_piece(self.params.path)
-        if str(path) != self.params.path:
-            self.log.warning("%s exists: writing the take's next piece, %s", self.params.path, path.name)
-        self.bvh = BvhWriter(path, self.params.rate_hz, self.params.up_axis)
+        self.bvh: BvhWriter | None = None  # opened on the first frame, whose header says the world's up axis
 
     def on_message(self, topic, msg) -> None:
+        if self.bvh is None:
+            path = free_piece(self.params.path)
+            if str(path) != self.params.path:
+                self.log.warning("%s exists: writing the take's next piece, %s", self.params.path, path.name)
+            self.bvh = BvhWriter(path, self.params.rate_hz, msg.header.up_axis or DEFAULT_UP, names=self.params.names)
         pos, frames, _ = from_message(msg)
         self.bvh.add(pos, frames)
 
     def teardown(self) -> None:
-        self.bvh.close()
-        self.log.info("wrote %d frames to %s", self.bvh.frames, self.bvh.path)
+        if self.bvh is not None:
+            self.bvh.close()
+            self.log.info("wrote %d frames to %s", self.bvh.frames, self.bvh.path)

@@ -1,14 +1,19 @@
-"""Replays a C3D, TRC or MAT recording onto ``markers/raw`` at the recording's rate (or ``rate_hz``)."""
+"""Replays a C3D, TRC or MAT recording onto ``markers/raw`` at the recording's rate (or ``rate_hz``).
+
+The frames' headers carry the recording's up axis where the file says it (a bag; a synthetic take), or
+``up_axis`` where it says it wrongly or not at all; otherwise the first node with a profile stamps the
+profile's."""
 from __future__ import annotations
 
 import time
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, Message
 from mocap_core.recordings import read_recording
+from mocap_core.world import normalize_up
 from nodes.lockstep import Lockstep
 from nodes.runtime import Node
 
@@ -33,6 +38,13 @@ class Params(BaseModel):
     lockstep_topic: str | None = Field(None, description="for tests: send the next frame only once this topic "
                                        "has carried the last one (e.g. skeleton/solved)")
     lockstep_timeout_s: float = Field(2.0, gt=0)
+    up_axis: str | None = Field(None, description="the recording's up axis (+z, -y, ...), over what the file "
+                                "says; unset: the file's, else the profile's")
+
+    @field_validator("up_axis")
+    @classmethod
+    def _up(cls, v):
+        return None if v is None else normalize_up(v)
 
 
 class FileSource(Node):
@@ -56,6 +68,7 @@ class FileSource(Node):
         self.index = self.first
         self.sent = 0
         self.next_set = 0.0
+        self.up_axis = p.up_axis or self.rec.meta.get("up_axis", "")
         self.lockstep = Lockstep(self.ctx, p.lockstep_topic, p.lockstep_timeout_s)
         self.log.info("replaying %s: %d markers, %d frames at %.0f Hz", self.rec.source, len(self.rec.labels),
                       self.rec.n_frames, self.rate)
@@ -72,14 +85,14 @@ class FileSource(Node):
             return None
         now = time.monotonic()
         if now >= self.next_set:
-            self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=rec.labels,
+            self.ctx.publish("markers/set", MarkerSet(header=self._header(0, 0.0), labels=rec.labels,
                                                       rate_hz=self.rate, source=rec.source))
             self.next_set = now + SET_PERIOD_S
         pos = rec.positions[self.index]
         flags = np.where(np.isnan(pos).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         frame = rec.first_frame + self.index
         self.ctx.publish("markers/raw", MarkerFrame(
-            header=MarkerFrame.make_header(frame, self.index / rec.rate_hz, time.time_ns()),
+            header=self._header(frame, self.index / rec.rate_hz),
             labels=rec.labels, positions=pos, flags=flags))
         self.index += 1
         self.sent += 1
@@ -87,3 +100,6 @@ class FileSource(Node):
             self.lockstep.sent(frame)
             return 0.0
         return 1.0 / self.rate
+
+    def _header(self, frame: int, t: float):
+        return MarkerFrame.make_header(frame, t, time.time_ns(), self.up_axis)

@@ -21,7 +21,7 @@ from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.marker_gate import MarkerGate
 from mocap_core.pair_guard import PAIR_GUARD_HELP
 from mocap_core.pose_memory import POSE_MEMORY_HELP
-from mocap_core.profiles import LANDMARKS, load_profile
+from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
 from mocap_core.segment_rebuild import REBUILD_HELP
 from mocap_core.warmup import warm_up
 from nodes.runtime import Node
@@ -29,7 +29,8 @@ from nodes.runtime import Node
 
 class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    profile: str = Field(description="marker-set profile name (profiles/) or YAML path")
+    profile: str = Field(AUTO, description="marker-set profile name (profiles/) or YAML path; auto: the shipped "
+                                           "one the stream's labels fit")
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
     when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
     rebuild: bool = Field(False, description=REBUILD_HELP)
@@ -44,7 +45,8 @@ class HipInterpolation(Node):
     publishes = {"markers/filled": MarkerFrame}
 
     def setup(self) -> None:
-        self.profile = load_profile(self.params.profile)
+        if self.params.profile != AUTO:
+            self._use(load_profile(self.params.profile))  # a bad name fails here, before the graph is ready
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
         self.fills = None  # made when the profile is resolved: they need its tracking markers and landmarks
         if self.params.rebuild:
@@ -57,9 +59,15 @@ class HipInterpolation(Node):
         self.map = None
         self.gate = MarkerGate()  # markers no body could have put there never reach what the stages learn
 
+    def _use(self, profile) -> None:
+        self.profile = profile
+        self.ctx.default_up_axis = profile.up_axis  # for sources that do not say it
+
     def on_message(self, topic, msg: MarkerFrame) -> None:
         if msg.labels != self.labels:  # first frame, or the marker set changed: resolve again
-            self.map = self.profile.resolve(msg.labels)  # a ProfileError is counted and logged by the runtime
+            if self.params.profile == AUTO:  # a ProfileError is counted and logged by the runtime
+                self._use(profile_for(AUTO, msg.labels, self.log))
+            self.map = self.profile.resolve(msg.labels)
             self.labels = msg.labels
             # (new ones: what they learned was of the old marker set's landmarks)
             self.fills = LandmarkFills(self.params.rebuild, self.params.pose_memory, self.map.tracking_of,

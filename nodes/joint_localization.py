@@ -8,7 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import FLAG_INTERPOLATED, MarkerFrame, SkeletonFrame
 from mocap_core.localization import Localizer
-from mocap_core.profiles import LANDMARKS, load_profile
+from mocap_core.profiles import AUTO, LANDMARKS, load_profile
 from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import to_message
@@ -16,7 +16,8 @@ from nodes.skeleton_codec import to_message
 
 class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    profile: str = Field(description="marker-set profile (its body measurements feed the fallbacks)")
+    profile: str = Field(AUTO, description="marker-set profile (its body measurements feed the fallbacks); auto: "
+                                           "default measurements")
 
 
 class JointLocalization(Node):
@@ -27,7 +28,12 @@ class JointLocalization(Node):
 
     def setup(self) -> None:
         warm_up()
-        self.localizer = Localizer(load_profile(self.params.profile).body)
+        if self.params.profile == AUTO:  # hip_interpolation chose it and stamped its up axis
+            self.localizer = Localizer()
+        else:
+            profile = load_profile(self.params.profile)
+            self.localizer = Localizer(profile.body)
+            self.ctx.default_up_axis = profile.up_axis  # for sources that do not say it
 
     def on_message(self, topic, msg: MarkerFrame) -> None:
         if msg.labels != list(LANDMARKS):

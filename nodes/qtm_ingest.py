@@ -2,7 +2,8 @@
 
 The client is asyncio; it runs in a thread of its own and hands frames to the node over a queue,
 so the node's loop (heartbeats, publishing) never waits on the network. Labels and rate come from
-the 3D and General parameters at every (re)connection; a label change publishes a new MarkerSet.
+the 3D and General parameters at every (re)connection; a label change publishes a new MarkerSet. Every frame's
+header carries QTM's up axis (``AxisUpwards``; ``up_axis`` overrides a QTM that says it wrongly).
 When QTM goes away the thread reconnects with backoff (0.5 s doubling to 5 s) and says so; a
 connection that QTM never answers is given up (and closed) after ``timeout_s``. A bad
 packet is counted and skipped; nothing from the network can stop the node.
@@ -16,9 +17,10 @@ import time
 import xml.etree.ElementTree as ET
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet
+from mocap_core.world import DEFAULT_UP, normalize_up
 from nodes.runtime import Node
 
 UNITS_M = 0.001  # QTM streams millimetres
@@ -32,6 +34,12 @@ class Params(BaseModel):
     frames: str = Field("allframes", description="allframes, frequency:N or frequencydivisor:N")
     timeout_s: float = Field(5.0, gt=0)
     max_backoff_s: float = Field(5.0, gt=0)
+    up_axis: str | None = Field(None, description="the world's up axis (+z, -y, ...) over QTM's AxisUpwards")
+
+    @field_validator("up_axis")
+    @classmethod
+    def _up(cls, v):
+        return None if v is None else normalize_up(v)
 
 
 class QtmIngest(Node):
@@ -43,6 +51,7 @@ class QtmIngest(Node):
     def setup(self) -> None:
         self.inbox: queue.Queue = queue.Queue(maxsize=10000)
         self.labels: list[str] = []
+        self.up_axis = self.params.up_axis or DEFAULT_UP
         self.stopping = threading.Event()
         self.started_ns: int | None = None
         self.stale, self.stale_logged = 0, False
@@ -63,13 +72,15 @@ class QtmIngest(Node):
             if kind == "frame" and payload[3] < self.started_ns:
                 self.stale += 1
             elif kind == "set":
-                self.labels, rate = payload
-                self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=self.labels,
-                                                          rate_hz=rate, source=f"qtm://{self.params.host}"))
+                self.labels, rate, up = payload
+                self.up_axis = self.params.up_axis or up
+                self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(up_axis=self.up_axis),
+                                                          labels=self.labels, rate_hz=rate,
+                                                          source=f"qtm://{self.params.host}"))
             elif kind == "frame":
                 self._publish_frame(*payload)
             elif kind == "error":
-                self.ctx._error(payload[0], payload[1])
+                self.ctx.bad_input(payload[0], payload[1])
             try:
                 item = self.inbox.get_nowait()
             except queue.Empty:
@@ -80,12 +91,12 @@ class QtmIngest(Node):
 
     def _publish_frame(self, frame: int, timestamp_us: int, xyz_mm: np.ndarray, received_ns: int) -> None:
         if xyz_mm.shape[0] != len(self.labels):
-            self.ctx._error("label_count", f"frame {frame}: {xyz_mm.shape[0]} markers for {len(self.labels)} labels")
+            self.ctx.bad_input("label_count", f"frame {frame}: {xyz_mm.shape[0]} markers for {len(self.labels)} labels")
             return
         pos = (xyz_mm * UNITS_M).astype(np.float32)
         flags = np.where(np.isnan(pos).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         self.ctx.publish("markers/raw", MarkerFrame(
-            header=MarkerFrame.make_header(frame, timestamp_us / 1e6, received_ns), labels=self.labels,
+            header=MarkerFrame.make_header(frame, timestamp_us / 1e6, received_ns, self.up_axis), labels=self.labels,
             positions=pos, flags=flags))
 
     def teardown(self) -> None:
@@ -122,10 +133,11 @@ class QtmIngest(Node):
                 root = ET.fromstring(await conn.get_parameters(parameters=["general", "3d"]))
                 labels = [e.text or "" for e in root.findall("The_3D/Label/Name")]
                 rate = float(root.findtext("General/Frequency") or 0)
+                up = _up_axis(root.findtext("The_3D/AxisUpwards"))
                 if labels != self.labels or not was_connected:
                     self.log.info("QTM %s:%d: %d labels at %.0f Hz%s", p.host, p.port, len(labels), rate,
                                   " (labels changed)" if was_connected and labels != self.labels else "")
-                self.inbox.put(("set", (labels, rate)))
+                self.inbox.put(("set", (labels, rate, up)))
                 await conn.stream_frames(frames=p.frames, components=["3d"], on_packet=self._on_packet)
                 was_connected, backoff = True, 0.5
                 while not lost.is_set() and not self.stopping.is_set():
@@ -167,6 +179,14 @@ class QtmIngest(Node):
     def _on_event(self, event) -> None:
         name = getattr(event, "name", str(event))
         self.log.info("QTM event: %s", name)
+
+
+def _up_axis(text: str | None) -> str:
+    """QTM's AxisUpwards ("+Z", "-Y", ...); QTM's default where it says nothing we understand."""
+    try:
+        return normalize_up(text or DEFAULT_UP)
+    except ValueError:
+        return DEFAULT_UP
 
 
 class _KeepsTransports:

@@ -1,5 +1,6 @@
 """Stage 5: join the torso and the four limbs of each frame -> ``skeleton/solved``, and map the
-pose onto the character rig -> ``rig/pose`` (rotations relative to the rig's T-pose; mocap_core/rig.py).
+pose onto the character rig -> ``rig/pose`` (rotations relative to the rig's T-pose; mocap_core/rig.py),
+turning the source's world by the up axis its frames carry.
 """
 from __future__ import annotations
 
@@ -12,10 +13,11 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import LimbSolution, RigPose, SkeletonFrame
 from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
 from mocap_core.limb_join import LIMBS, FrameJoiner, Joined
-from mocap_core.rig import BONE_JOINT, BONES, local_positions, rig_local_rotations, rig_world_rotations, \
-    to_unity_position
+from mocap_core.rig import BONE_JOINT, BONES, default_rig_offsets, local_positions, rig_local_rotations, \
+    rig_world_rotations, to_unity_position
 from mocap_core.skeleton import Status
 from mocap_core.warmup import warm_up
+from mocap_core.world import DEFAULT_UP
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
 
@@ -23,8 +25,11 @@ from nodes.skeleton_codec import from_message, to_message
 class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     max_wait_ms: float = Field(20.0, gt=0, description="longest wait for a late limb before it is held")
-    up_axis: Literal["x", "y", "z"] = Field("z", description="the source's vertical axis (the profile's up_axis)")
     rig: Literal["unity_humanoid"] = "unity_humanoid"
+    bone_positions: Literal["rig", "actor"] = Field(
+        "rig", description="rig: each bone's local position is the character's own (it keeps its proportions); "
+                           "actor: the actor's bones this frame (a receiver that applies positions reshapes the "
+                           "character to the actor)")
     input: Literal["limbs", "whole"] = Field(
         "limbs", description="limbs: join skeleton/torso and the four skeleton/limb/* topics; whole: take "
                              "skeleton/fitted, one whole skeleton a frame (the skeleton_fit node)")
@@ -70,13 +75,16 @@ class Retarget(Node):
                 self._publish_rig(j)
 
     def _publish_rig(self, j) -> None:
-        up = self.params.up_axis
+        up = j.source.header.up_axis or DEFAULT_UP
         world = rig_world_rotations(j.frames, up)
         unknown = ~np.isfinite(world).all(axis=(1, 2))
         world[unknown] = self.last_world[unknown]  # a bone without a frame keeps its last rotation
         self.last_world = world
         local = rig_local_rotations(world)
-        offsets = np.nan_to_num(local_positions(j.positions, world, up))
+        if self.params.bone_positions == "rig":
+            offsets = default_rig_offsets()
+        else:
+            offsets = np.nan_to_num(local_positions(j.positions, world, up))
         held = (j.status[BONE_JOINT] != Status.LOCATED) | unknown
         self.ctx.publish("rig/pose", RigPose(
             header=RigPose.make_header(), rig=self.params.rig, bones=list(BONES),

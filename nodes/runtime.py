@@ -161,6 +161,7 @@ class NodeContext:
         self.inbox: collections.deque[tuple[str, Message]] = collections.deque()  # handed over, not yet handled
         self.in_hand: Message | None = None  # the handed-over message being handled now (shared: not ours)
         self.received_ns = 0  # when the message being handled arrived (before decoding: a bag's receive time)
+        self.default_up_axis = ""  # stamped where the source did not say it (a node with a profile sets it)
         for cls in ALL_MESSAGES:  # (a node typed `Message`, like the recorder, may get any of them)
             prepare(cls)  # the first frame through a node should cost what every other one does
 
@@ -283,6 +284,7 @@ class NodeContext:
         if source is not None:
             sh = source.header
             h["frame"], h["capture_time_s"], h["entry_time_ns"] = sh.frame, sh.capture_time_s, sh.entry_time_ns
+            h["up_axis"] = h["up_axis"] or sh.up_axis or self.default_up_axis
         elif h["entry_time_ns"] == 0:
             h["entry_time_ns"] = time.time_ns()
         wire = self.wire_topic(topic)

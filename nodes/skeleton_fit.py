@@ -15,7 +15,7 @@ from messages import MarkerFrame, SkeletonFrame
 from mocap_core.fit.fitter import FitSettings
 from mocap_core.fit.live import LiveFit, LiveSettings
 from mocap_core.fit.subject import load_subject
-from mocap_core.profiles import load_profile
+from mocap_core.profiles import AUTO, load_profile, profile_for
 from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import to_message
@@ -23,7 +23,8 @@ from nodes.skeleton_codec import to_message
 
 class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    profile: str = Field(description="marker-set profile (seeds the calibration's bone frames)")
+    profile: str = Field(AUTO, description="marker-set profile (seeds the calibration's bone frames); auto: the "
+                                           "shipped one the stream's labels fit")
     subject: str | None = Field(None, description="subject file from `mocap calibrate`; none: calibrate live")
     save_subject: str | None = Field(None, description="write the live calibration here once it has converged")
     first_calibration_s: float = Field(2.0, gt=0, description="seconds of stream before the first calibration")
@@ -38,7 +39,9 @@ class SkeletonFit(Node):
 
     def setup(self) -> None:
         warm_up()
-        self.profile = load_profile(self.params.profile)
+        if self.params.profile != AUTO:
+            self.profile = load_profile(self.params.profile)  # a bad name fails here, before the graph is ready
+            self.ctx.default_up_axis = self.profile.up_axis  # for sources that do not say it
         self.subject = load_subject(self.params.subject) if self.params.subject else None
         self.live: LiveFit | None = None
         self.labels: list[str] = []
@@ -47,6 +50,9 @@ class SkeletonFit(Node):
     def on_message(self, topic, msg: MarkerFrame) -> None:
         if self.live is None or msg.labels != self.labels:  # the first frame, or a new marker set
             self.labels = list(msg.labels)
+            if self.params.profile == AUTO:
+                self.profile = profile_for(AUTO, self.labels, self.log)
+                self.ctx.default_up_axis = self.profile.up_axis
             self.live = LiveFit(self.profile, self.labels, self.subject, FitSettings(limits=self.params.limits),
                                 LiveSettings(first_s=self.params.first_calibration_s))
         calibrations = self.live.calibrations

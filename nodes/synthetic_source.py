@@ -32,11 +32,11 @@ class SyntheticSource(Node):
         if p.frames and self.frame >= p.frames:
             return None
         if self.frame == 0:
-            self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=self.labels,
+            self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(up_axis="+z"), labels=self.labels,
                                                       rate_hz=p.rate_hz, source="synthetic"))
         t = self.frame / p.rate_hz
         pos = np.stack([np.cos(self.phase + t), np.sin(self.phase + t), np.full(p.markers, 1.0)], axis=1)
-        msg = MarkerFrame(header=MarkerFrame.make_header(self.frame, t), labels=self.labels,
+        msg = MarkerFrame(header=MarkerFrame.make_header(self.frame, t, up_axis="+z"), labels=self.labels,
                           positions=pos.astype(np.float32), flags=np.zeros(p.markers, np.uint8))
         self.ctx.publish("markers/raw", msg)  # entry time stamped there, as the frame goes out
         self.frame += 1

@@ -11,13 +11,12 @@ import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Literal
-
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import Heartbeat, MarkerFrame, SkeletonFrame
 from mocap_core.skeleton import JOINTS, PARENT_INDEX
+from mocap_core.world import DEFAULT_UP, to_canonical
 from nodes.runtime import Node
 
 PAGE = Path(__file__).with_name("viewer.html")
@@ -28,7 +27,6 @@ class Params(BaseModel):
     host: str = "127.0.0.1"
     port: int = Field(8090, ge=0, le=65535)
     max_fps: float = Field(30.0, gt=0)
-    up_axis: Literal["x", "y", "z"] = "z"
 
 
 class Viewer(Node):
@@ -37,7 +35,7 @@ class Viewer(Node):
     subscribes = {"skeleton/solved": SkeletonFrame, "markers/raw": MarkerFrame, "diagnostics": Heartbeat}
 
     def setup(self) -> None:
-        self.state = {"skeleton": None, "markers": None, "nodes": {}, "frame": -1}
+        self.state = {"skeleton": None, "markers": None, "nodes": {}, "frame": -1, "up": DEFAULT_UP}
         self.version = 0
         self.cond = threading.Condition()
         viewer = self
@@ -78,7 +76,7 @@ class Viewer(Node):
     def snapshot(self) -> str:
         with self.cond:
             return json.dumps({**self.state, "joints": JOINTS, "parents": PARENT_INDEX.tolist(),
-                               "up": self.params.up_axis})
+                               "to_y_up": to_canonical(self.state["up"]).tolist()})
 
     def stream(self, out) -> None:
         seen = -1
@@ -101,6 +99,7 @@ class Viewer(Node):
                 self.state["skeleton"] = {"positions": [None if np.isnan(p).any() else [round(float(v), 4) for v in p]
                                                         for p in pos], "status": msg.status.tolist()}
                 self.state["frame"] = msg.header.frame
+                self.state["up"] = msg.header.up_axis or self.state["up"]
             elif isinstance(msg, MarkerFrame):
                 self.state["markers"] = [[round(float(v), 4) for v in p] for p in msg.positions
                                          if np.isfinite(p).all()]

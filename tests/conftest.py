@@ -6,6 +6,7 @@ import csv
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -120,14 +121,14 @@ class Graph:
         return time.monotonic() - t
 
 
-def pipeline_graph(source: str, profile: str = "qualisys_sports", up_axis: str = "z", extra: str = "") -> str:
+def pipeline_graph(source: str, profile: str = "qualisys_sports", extra: str = "", retarget: str = "{}") -> str:
     """The full graph of DESIGN (source -> ... -> retarget) as launch-file text, with extra nodes."""
     limbs = "".join(f"  - {{id: {limb}, kind: ik_gapfill, params: {{limb: {limb}}}}}\n"
                     for limb in ("torso", "left_arm", "right_arm", "left_leg", "right_leg"))
     return (f"nodes:\n  - {{id: source, kind: file_source, params: {source}}}\n"
             f"  - {{id: hips, kind: hip_interpolation, params: {{profile: {profile}}}}}\n"
             f"  - {{id: localize, kind: joint_localization, params: {{profile: {profile}}}}}\n"
-            f"{limbs}  - {{id: retarget, kind: retarget, params: {{up_axis: {up_axis}}}}}\n{extra}\n")
+            f"{limbs}  - {{id: retarget, kind: retarget, params: {retarget}}}\n{extra}\n")
 
 
 @contextlib.contextmanager
@@ -159,3 +160,30 @@ def launched(tmp_path: Path, launch_text: str, *extra: str, name: str = "g"):
         for pid in pids:  # never leave a stray node behind, whatever the test did
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def emulator(tmp_path, *args, port=0, file="12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"):
+    ready = tmp_path / f"port-{os.getpid()}-{port}"
+    ready.unlink(missing_ok=True)
+    log = open(tmp_path / "qtm_sim.log", "a")
+    proc = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "qtm-sim", str(data_file(file)), "--port",
+                             str(port), "--ready-file", str(ready), *args], cwd=REPO, stdout=log,
+                            stderr=subprocess.STDOUT)
+    try:
+        wait_for(lambda: ready.exists() and ready.read_text(), 20, "the emulator to listen")
+        yield proc, int(ready.read_text())
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        log.close()

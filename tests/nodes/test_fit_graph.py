@@ -21,7 +21,7 @@ def test_fit_graph_calibrates_live_and_then_solves_every_joint(tmp_path):
         if node["id"] == "source":
             node["params"] = {"path": str(data_file(TAKE)), "max_frames": 480}
         if node["id"] == "fit":
-            node["params"]["save_subject"] = str(tmp_path / "actor.yaml")
+            node.setdefault("params", {})["save_subject"] = str(tmp_path / "actor.yaml")
         if node["id"] == "log":
             node["params"]["path"] = str(tmp_path / "solved.csv")
         if node["id"] == "viewer":

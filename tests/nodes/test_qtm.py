@@ -8,42 +8,14 @@ import struct
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
-from contextlib import contextmanager
 
 import numpy as np
 import qtm_rt
 
 from mocap_core.recordings import read_recording
-from tests.conftest import REPO, data_file, launched, log_rows, wait_for
+from tests.conftest import REPO, data_file, emulator, free_port, launched, log_rows, wait_for
 
 TAKE = "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"  # real gaps: NaN must come through
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@contextmanager
-def emulator(tmp_path, *args, port=0, file=TAKE):
-    ready = tmp_path / f"port-{os.getpid()}-{port}"
-    ready.unlink(missing_ok=True)
-    log = open(tmp_path / "qtm_sim.log", "a")
-    proc = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "qtm-sim", str(data_file(file)), "--port",
-                             str(port), "--ready-file", str(ready), *args], cwd=REPO, stdout=log,
-                            stderr=subprocess.STDOUT)
-    try:
-        wait_for(lambda: ready.exists() and ready.read_text(), 20, "the emulator to listen")
-        yield proc, int(ready.read_text())
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-        log.close()
 
 
 def test_qtm_rt_client_receives_the_take_exactly(tmp_path):
