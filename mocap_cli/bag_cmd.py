@@ -60,9 +60,12 @@ def add_parser(sub) -> None:
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=cmd_info)
 
-    e = bsub.add_parser("export", help="rewrite a bag with JSON encoding (Foxglove, Lichtblick)")
+    e = bsub.add_parser("export", help="rewrite a bag for Foxglove: its 3D scene (--foxglove) or JSON (--json)")
     e.add_argument("file")
-    e.add_argument("--json", required=True, metavar="OUT.mcap", help="output bag with JSON messages")
+    out = e.add_mutually_exclusive_group(required=True)
+    out.add_argument("--foxglove", metavar="OUT.mcap", help="skeleton and markers in Foxglove's schemas, for its "
+                     "3D panel (SceneUpdate, FrameTransforms)")
+    out.add_argument("--json", metavar="OUT.mcap", help="every message as JSON, arrays as lists of numbers")
     e.set_defaults(func=cmd_export)
 
     f = bsub.add_parser("from-recording", help="make a markers/raw bag from a C3D/TRC/MAT recording")
@@ -164,6 +167,12 @@ def cmd_info(args) -> int:
 
 
 def cmd_export(args) -> int:
+    if args.foxglove:
+        from nodes.foxglove_scene import export_foxglove
+
+        n = export_foxglove(args.file, args.foxglove)
+        print(f"wrote {n} Foxglove messages to {args.foxglove} (open it in Foxglove; a 3D panel shows /skeleton)")
+        return 0
     n = export_json(args.file, args.json)
     print(f"wrote {n} JSON messages to {args.json}")
     return 0

@@ -26,12 +26,12 @@ LAYOUTS: dict[str, dict[str, str]] = {
 
 def live_graph(port: int, profile: str, log_path: str | Path, name: str,
                layout: str = "processes", subject: str | None = None) -> LaunchFile:
-    """launch/qtm_studio.yaml pointed at the emulator, without the viewer and VMC, logging skeleton/solved,
+    """launch/qtm_studio.yaml pointed at the emulator, without the viewer, VMC and Foxglove, logging skeleton/solved,
     with the solving nodes in the processes ``layout`` names (see LAYOUTS). With a ``subject`` file, the
     rigid-skeleton fit (one skeleton_fit node, in the container of the others) solves instead."""
     lf = load_launch_file(REPO / "launch" / "qtm_studio.yaml", [
         f"qtm.port={port}", f"hips.profile={profile}", f"localize.profile={profile}"])
-    lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output")]
+    lf.nodes = [n for n in lf.nodes if n.kind not in ("viewer", "vmc_output", "foxglove_output")]
     if subject:
         at = next(i for i, n in enumerate(lf.nodes) if n.id == "hips")
         lf.nodes = [n for n in lf.nodes if n.kind not in ("hip_interpolation", "joint_localization", "ik_gapfill")]

@@ -1,8 +1,10 @@
-"""Topic bags in MCAP: each message's exact wire bytes, its receive time and capture time.
+"""Topic bags in MCAP: each message's exact wire bytes, its receive time (log time) and the time it entered the
+graph (publish time), both wall clock.
 
 Channels use ``message_encoding: msgpack`` with the message's JSON Schema (``schema encoding:
 jsonschema``), so any MCAP tool can list and inspect them; ``mocap bag export --json`` rewrites a
-bag with JSON encoding for Foxglove and Lichtblick. Chunks are small (64 KiB), so a recorder killed
+bag with JSON encoding (arrays as lists of numbers), ``--foxglove`` in Foxglove's own schemas for its 3D panel
+(nodes/foxglove_scene.py). Chunks are small (64 KiB), so a recorder killed
 with SIGKILL loses at most its last chunk: :func:`read_bag` reads such a file up to the damage.
 
 A recorder never truncates a file that exists: it writes the next *piece* of the take beside it
@@ -11,7 +13,6 @@ launcher restarts keeps everything recorded before. Reading a bag reads its piec
 """
 from __future__ import annotations
 
-import base64
 import json
 import logging
 import struct
@@ -24,6 +25,7 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, Writer
 
 from messages import BY_SCHEMA, decode
+from messages.arrays import WIRE_JSON_SCHEMA
 from messages.codec import json_schemas, peek_schema
 
 CHUNK_BYTES = 64 * 1024
@@ -41,7 +43,7 @@ class BagMessage:
     schema: str
     data: bytes           # the exact wire payload
     log_time_ns: int      # when the recorder received it
-    publish_time_ns: int  # capture time of the frame (header.capture_time_s), ns
+    publish_time_ns: int  # when the frame entered the graph (header.entry_time_ns): wall clock, as log_time
 
 
 def piece(path: Path, k: int) -> Path:
@@ -96,7 +98,7 @@ class BagWriter:
             publish_time_ns = log_time_ns
             if head is not None and schema in BY_SCHEMA:
                 try:
-                    publish_time_ns = int(decode(payload, topic).header.capture_time_s * 1e9)
+                    publish_time_ns = decode(payload, topic).header.entry_time_ns or log_time_ns
                 except Exception:
                     pass
         cid = self._channel(topic, schema)
@@ -180,13 +182,12 @@ def bag_info(path: str | Path) -> dict:
 
 
 def to_json(value):
-    """A decoded message -> JSON-able data; arrays as {dtype, shape, data: base64} (their JSON Schema)."""
+    """A decoded message -> JSON-able data; arrays as (nested) lists of numbers, NaN as null."""
     import numpy as np
     from pydantic import BaseModel
 
     if isinstance(value, np.ndarray):
-        return {"dtype": value.dtype.str, "shape": list(value.shape),
-                "data": base64.b64encode(np.ascontiguousarray(value).tobytes()).decode()}
+        return to_json(value.tolist())
     if isinstance(value, BaseModel):
         return {(f.alias or n): to_json(getattr(value, n)) for n, f in type(value).model_fields.items()}
     if isinstance(value, dict):
@@ -196,6 +197,20 @@ def to_json(value):
     if isinstance(value, float) and value != value:
         return None
     return value
+
+
+JSON_ARRAY_SCHEMA = {"type": "array", "description": "numpy array as (nested) lists of numbers; null where NaN"}
+
+
+def _with_json_arrays(schema):
+    """A message's JSON Schema with each wire array (raw bytes, dtype, shape) as the lists ``to_json`` writes."""
+    if isinstance(schema, dict) and schema.get("properties") == WIRE_JSON_SCHEMA["properties"]:
+        return {**JSON_ARRAY_SCHEMA, **({"title": schema["title"]} if "title" in schema else {})}
+    if isinstance(schema, dict):
+        return {k: _with_json_arrays(v) for k, v in schema.items()}
+    if isinstance(schema, list):
+        return [_with_json_arrays(v) for v in schema]
+    return schema
 
 
 def export_json(src: str | Path, dst: str | Path) -> int:
@@ -213,8 +228,8 @@ def export_json(src: str | Path, dst: str | Path) -> int:
         except Exception:
             continue  # a foreign payload has no JSON form
         if m.schema not in schemas:
-            schemas[m.schema] = w.register_schema(m.schema, "jsonschema",
-                                                  json.dumps(all_schemas.get(m.schema, {})).encode())
+            schema = _with_json_arrays(all_schemas.get(m.schema, {}))
+            schemas[m.schema] = w.register_schema(m.schema, "jsonschema", json.dumps(schema).encode())
         if m.topic not in channels:
             channels[m.topic] = w.register_channel(m.topic, "json", schemas[m.schema])
         w.add_message(channels[m.topic], log_time=m.log_time_ns, publish_time=m.publish_time_ns,

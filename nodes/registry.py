@@ -23,6 +23,7 @@ KINDS: dict[str, str] = {
     "vmc_output": "nodes.vmc_output:VmcOutput",
     "bvh_writer": "nodes.bvh_writer:BvhWriterNode",
     "viewer": "nodes.viewer:Viewer",
+    "foxglove_output": "nodes.foxglove_output:FoxgloveOutput",
 }
 
 

@@ -164,7 +164,54 @@ def test_export_json_for_foxglove(raw_bag, tmp_path):
     schema, channel, message = msgs[0]
     assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
     body = json.loads(message.data)
-    assert body["header"]["schema"] == "mocap.MarkerFrame" and body["positions"]["shape"] == [53, 3]
+    assert body["header"]["schema"] == "mocap.MarkerFrame"
+    first = decode(next(iter(read_bag(raw_bag, ["markers/raw"]))).data, "markers/raw")
+    got = np.array([[np.nan if v is None else v for v in p] for p in body["positions"]])  # numbers, not base64
+    np.testing.assert_array_equal(got, first.positions)
+    assert json.loads(schema.data)["properties"]["positions"]["type"] == "array"
+
+
+def test_export_foxglove_puts_the_solved_joints_in_its_3d_scene(tmp_path):
+    """`mocap solve`'s joints, as a graph's skeleton/solved bag from a Y-up take, exported in foxglove-sdk's schemas:
+    the scene's spheres sit on the joints turned Z up, and log and publish times are one wall clock."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+    import foxglove.messages as fm
+
+    from mocap_core.joints_csv import read_joints_csv
+    from mocap_core.skeleton import Status
+    from mocap_core.world import to_canonical
+    from nodes.bags import BagWriter
+    from messages import encode
+
+    csv_path, bag, out = tmp_path / "joints.csv", tmp_path / "solved.mcap", tmp_path / "foxglove.mcap"
+    r = mocap("solve", str(data_file(TAKE)), "--profile", "vicon53", "--joints-out", str(csv_path), "--quiet")
+    assert r.returncode == 0, r.stderr
+    frames, _, positions, status = read_joints_csv(csv_path)
+    t0 = time.time_ns()
+    writer = BagWriter(bag)
+    for f in range(100):
+        msg = SkeletonFrame(header=SkeletonFrame.make_header(int(frames[f]), f / 120, t0 + f * 8_333_333, "+y"),
+                            positions=positions[f].astype(np.float32), orientations=np.zeros((27, 4), np.float32),
+                            status=status[f].astype(np.uint8))
+        writer.write("skeleton/solved", encode(msg), t0 + f * 8_333_333 + 500_000)
+    writer.close()
+    assert mocap("bag", "export", str(bag), "--foxglove", str(out)).returncode == 0
+    z_up = to_canonical("+z").T @ to_canonical("+y")
+    with open(out, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        scenes = [(s, m, d) for s, c, m, d in reader.iter_decoded_messages(topics=["/skeleton"])]
+    assert len(scenes) == 100
+    schema = scenes[0][0]
+    assert (schema.name, schema.encoding) == ("foxglove.SceneUpdate", "protobuf")
+    assert schema.data == fm.SceneUpdate.get_schema().data        # foxglove-sdk's own schema
+    for f, (_, message, scene) in enumerate(scenes):
+        assert message.log_time == message.publish_time == t0 + f * 8_333_333   # the frame's graph-entry time
+        seen = status[f] != Status.MISSING
+        want = positions[f][seen] @ z_up.T
+        got = np.array([[s.pose.position.x, s.pose.position.y, s.pose.position.z] for s in scene.entities[0].spheres])
+        np.testing.assert_allclose(got, want, atol=1e-6)
+    assert np.median([s.entities[0].spheres[5].pose.position.z for _, _, s in scenes]) > 1.0  # the head, Z up
 
 
 def test_a_bag_feeds_mocap_solve_and_the_qtm_emulator(raw_bag, tmp_path):

@@ -40,7 +40,7 @@ def _run(tmp_path, rate_hz: float, cap_hz: float, seconds: float, viewer_port: i
     """launch/qtm_unity.yaml on the karate take at ``rate_hz``; the receiver after ``seconds`` of stream."""
     vmc = VmcReceiver()
     sets = ["--set", f"vmc.port={vmc.port}", "--set", f"vmc.max_rate_hz={cap_hz}",
-            "--set", f"viewer.port={viewer_port or free_port()}"]
+            "--set", f"viewer.port={viewer_port or free_port()}", "--set", "foxglove.port=0"]
     arrivals = []
     original = vmc._root
 

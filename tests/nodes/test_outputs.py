@@ -205,3 +205,55 @@ def _get(url):
             return r.read()
     except OSError:
         return b""
+
+
+def _protobuf_class(schema_b64: str, name: str):
+    import base64
+
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    pool = descriptor_pool.DescriptorPool()
+    for fd in descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(schema_b64)).file:
+        pool.Add(fd)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+
+
+@pytest.mark.timeout(180)
+def test_foxglove_websocket_streams_an_upright_skeleton(tmp_path):
+    """A Foxglove WebSocket client (its WebSocket protocol over the websockets package) subscribes to /skeleton and
+    decodes a SceneUpdate with the schema the server advertises: joints drawn, head above the pelvis in Z."""
+    import json
+    import struct
+
+    from websockets.sync.client import connect
+
+    port = free_port()
+    extra = f"  - {{id: foxglove, kind: foxglove_output, params: {{port: {port}}}}}"
+    graph = pipeline_graph(f"{{path: {data_file(TAKE)}, loop: true}}", extra=extra)
+    with launched(tmp_path, graph) as g:
+        def connected():
+            try:
+                return connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"], open_timeout=2)
+            except OSError:
+                return None
+
+        ws = wait_for(connected, 90, "the Foxglove server")
+        with ws:
+            channel = None
+            while channel is None:
+                msg = json.loads(ws.recv(timeout=30))
+                if msg.get("op") == "advertise":
+                    channel = next((c for c in msg["channels"] if c["topic"] == "/skeleton"), None)
+            assert (channel["encoding"], channel["schemaName"]) == ("protobuf", "foxglove.SceneUpdate")
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 7, "channelId": channel["id"]}]}))
+            scene_cls = _protobuf_class(channel["schema"], "foxglove.SceneUpdate")
+            while True:
+                data = ws.recv(timeout=30)
+                if isinstance(data, bytes) and data[0] == 1 and struct.unpack_from("<I", data, 1)[0] == 7:
+                    scene = scene_cls.FromString(data[13:])
+                    break
+        assert g.proc.poll() is None
+    spheres = scene.entities[0].spheres
+    assert len(spheres) >= 20 and len(scene.entities[0].lines[0].points) >= 40
+    z = [s.pose.position.z for s in spheres]
+    assert z[5] - z[0] > 0.4   # head above pelvis: Foxglove's world is Z up (this take is Z up too)

@@ -1,0 +1,56 @@
+"""Streams the skeleton to the Foxglove app live, through foxglove-sdk's WebSocket server (default
+ws://127.0.0.1:8765; in Foxglove: Open connection > Foxglove WebSocket). Topics and schemas: nodes/foxglove_scene.py
+(``/skeleton`` and ``/markers`` as SceneUpdate for the 3D panel, ``/tf`` as FrameTransforms). At most
+``max_rate_hz`` frames a second (the newest), like the viewer: a display needs no more."""
+from __future__ import annotations
+
+import time
+
+import foxglove
+from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
+from pydantic import BaseModel, ConfigDict, Field
+
+from messages import MarkerFrame, SkeletonFrame
+from nodes.foxglove_scene import joint_transforms, marker_scene, skeleton_scene
+from nodes.runtime import Node
+from nodes.skeleton_codec import from_message
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    host: str = "127.0.0.1"
+    port: int = Field(8765, ge=0, le=65535)
+    max_rate_hz: float = Field(60.0, gt=0)
+
+
+class FoxgloveOutput(Node):
+    kind = "foxglove_output"
+    Params = Params
+    subscribes = {"skeleton/solved": SkeletonFrame, "markers/raw": MarkerFrame}
+
+    def setup(self) -> None:
+        self.context = foxglove.Context()
+        self.server = foxglove.start_server(name="mocap", host=self.params.host, port=self.params.port,
+                                            context=self.context)
+        self.skeleton = SceneUpdateChannel("/skeleton", context=self.context)
+        self.markers = SceneUpdateChannel("/markers", context=self.context)
+        self.tf = FrameTransformsChannel("/tf", context=self.context)
+        self.next = {"skeleton/solved": 0.0, "markers/raw": 0.0}
+        self.log.info("Foxglove WebSocket at ws://%s:%d", self.params.host, self.server.port)
+
+    def on_message(self, topic, msg) -> None:
+        now = time.monotonic()
+        if now < self.next[topic]:
+            return
+        self.next[topic] = now + 1.0 / self.params.max_rate_hz
+        t = msg.header.entry_time_ns or time.time_ns()
+        up = msg.header.up_axis
+        if isinstance(msg, SkeletonFrame):
+            positions, frames, status = from_message(msg)
+            self.skeleton.log(skeleton_scene(positions, status, up, t), log_time=t)
+            self.tf.log(joint_transforms(positions, frames, up, t), log_time=t)
+        else:
+            self.markers.log(marker_scene(msg.positions.astype(float), up, t), log_time=t)
+
+    def teardown(self) -> None:
+        self.server.stop()
