@@ -4,9 +4,11 @@ The client is asyncio; it runs in a thread of its own and hands frames to the no
 so the node's loop (heartbeats, publishing) never waits on the network. Labels and rate come from
 the 3D and General parameters at every (re)connection; a label change publishes a new MarkerSet. Every frame's
 header carries QTM's up axis (``AxisUpwards``; ``up_axis`` overrides a QTM that says it wrongly).
-When QTM goes away the thread reconnects with backoff (0.5 s doubling to 5 s) and says so; a
-connection that QTM never answers is given up (and closed) after ``timeout_s``. A bad
-packet is counted and skipped; nothing from the network can stop the node.
+When QTM goes away the thread tries again every 0.25-0.5 s (``max_backoff_s``), so frames resume within a second
+of QTM's return, and says so; a connection that QTM never answers is given up (and closed) after ``timeout_s``.
+A watchdog reconnects when no frame came for ``stall_s`` and QTM did not say it stopped (``qtm_stall`` in the
+heartbeat's errors); framing no QTM sends (sizes, component tables) closes the connection (``qtm_garbage``)
+before qtm-rt's parser can spin on it (nodes/qtm_guard.py). Nothing from the network can stop the node.
 """
 from __future__ import annotations
 
@@ -21,9 +23,12 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet
 from mocap_core.world import DEFAULT_UP, normalize_up
+from nodes.qtm_guard import GuardedReceiver
 from nodes.runtime import Node
 
 UNITS_M = 0.001  # QTM streams millimetres
+MIN_BACKOFF_S = 0.25
+AWAY_LOG_S = 10.0
 
 
 class Params(BaseModel):
@@ -33,7 +38,9 @@ class Params(BaseModel):
     version: str = "1.25"
     frames: str = Field("allframes", description="allframes, frequency:N or frequencydivisor:N")
     timeout_s: float = Field(5.0, gt=0)
-    max_backoff_s: float = Field(5.0, gt=0)
+    max_backoff_s: float = Field(0.5, gt=0, description="longest wait between connection attempts")
+    stall_s: float = Field(1.0, ge=0, description="no frame for this long, and QTM did not say it stopped: "
+                                                  "an error and a reconnect (0 = never)")
     up_axis: str | None = Field(None, description="the world's up axis (+z, -y, ...) over QTM's AxisUpwards")
 
     @field_validator("up_axis")
@@ -111,11 +118,11 @@ class QtmIngest(Node):
         import qtm_rt
 
         p = self.params
-        backoff = 0.5
+        backoff, away_since, said_away = MIN_BACKOFF_S, None, 0.0
         was_connected = False
         while not self.stopping.is_set():
             lost = asyncio.Event()
-            loop = _KeepsTransports(asyncio.get_running_loop())
+            loop = _GuardedLoop(asyncio.get_running_loop(), self._bad_stream)
             try:  # (qtm_rt waits for QTM's answer to its version command without a timeout of its own)
                 conn = await asyncio.wait_for(
                     qtm_rt.connect(p.host, port=p.port, version=p.version, timeout=p.timeout_s, loop=loop,
@@ -125,10 +132,16 @@ class QtmIngest(Node):
                 for transport in loop.transports:  # (else the connection given up on stays open)
                     transport.close()
             if conn is None:
-                self.log.warning("QTM at %s:%d not reachable; retrying in %.1f s", p.host, p.port, backoff)
+                now = time.monotonic()
+                away_since = away_since or now
+                if now - said_away >= AWAY_LOG_S:  # said at once, then every AWAY_LOG_S: retries are frequent
+                    said_away = now
+                    self.log.warning("QTM at %s:%d not reachable%s; retrying every %.1f s", p.host, p.port,
+                                     f" for {now - away_since:.0f} s" if now > away_since else "", p.max_backoff_s)
                 await self._sleep(backoff)
                 backoff = min(backoff * 2, p.max_backoff_s)
                 continue
+            away_since, said_away = None, 0.0
             try:
                 root = ET.fromstring(await conn.get_parameters(parameters=["general", "3d"]))
                 labels = [e.text or "" for e in root.findall("The_3D/Label/Name")]
@@ -139,11 +152,8 @@ class QtmIngest(Node):
                                   " (labels changed)" if was_connected and labels != self.labels else "")
                 self.inbox.put(("set", (labels, rate, up)))
                 await conn.stream_frames(frames=p.frames, components=["3d"], on_packet=self._on_packet)
-                was_connected, backoff = True, 0.5
-                while not lost.is_set() and not self.stopping.is_set():
-                    await asyncio.sleep(0.1)
-                if lost.is_set():
-                    self.log.warning("lost the connection to QTM at %s:%d; reconnecting", p.host, p.port)
+                was_connected, backoff = True, MIN_BACKOFF_S
+                await self._watch(loop.receiver, lost)
             except Exception as e:  # a QTM that answers nonsense: count it, wait, try again
                 self.inbox.put(("error", ("qtm_session", f"QTM session failed: {e!r}")))
                 await self._sleep(backoff)
@@ -153,6 +163,25 @@ class QtmIngest(Node):
                     conn.disconnect()
                 except Exception:
                     pass
+
+    async def _watch(self, receiver, lost: asyncio.Event) -> None:
+        """While streaming: until the connection is lost, or (the watchdog) no frame came for ``stall_s`` and
+        QTM did not say it stopped."""
+        p = self.params
+        while not lost.is_set() and not self.stopping.is_set():
+            await asyncio.sleep(0.05)
+            silent = time.monotonic() - receiver.last_data
+            if p.stall_s and not receiver.stopped and silent > p.stall_s:
+                self.inbox.put(("error", ("qtm_stall", f"no frame from QTM at {p.host}:{p.port} for {silent:.1f} s; "
+                                                       "reconnecting")))
+                return
+        if lost.is_set():
+            self.log.warning("lost the connection to QTM at %s:%d; reconnecting", p.host, p.port)
+
+    def _bad_stream(self, transport, why: str) -> None:
+        """QTM's port sent what no QTM sends: counted, and the connection closed (the loop reconnects)."""
+        self.inbox.put(("error", ("qtm_garbage", f"{why}; reconnecting")))
+        transport.close()
 
     async def _sleep(self, seconds: float) -> None:
         end = time.monotonic() + seconds
@@ -189,12 +218,13 @@ def _up_axis(text: str | None) -> str:
         return DEFAULT_UP
 
 
-class _KeepsTransports:
-    """The running loop, keeping what ``qtm_rt.connect`` opens with it: a connect given up on leaves its
-    connection open otherwise, and qtm-rt hands back nothing to close it with."""
+class _GuardedLoop:
+    """The running loop, keeping what ``qtm_rt.connect`` opens with it (a connect given up on leaves its connection
+    open otherwise, and qtm-rt hands back nothing to close it with), and putting a GuardedReceiver in front of
+    qtm-rt's parser before any byte arrives (nodes/qtm_guard.py)."""
 
-    def __init__(self, loop: asyncio.AbstractEventLoop):
-        self._loop, self.transports = loop, []
+    def __init__(self, loop: asyncio.AbstractEventLoop, on_bad):
+        self._loop, self._on_bad, self.transports, self.receiver = loop, on_bad, [], None
 
     def __getattr__(self, name):
         return getattr(self._loop, name)
@@ -202,4 +232,6 @@ class _KeepsTransports:
     async def create_connection(self, *args, **kwargs):
         transport, protocol = await self._loop.create_connection(*args, **kwargs)
         self.transports.append(transport)
+        self.receiver = GuardedReceiver(protocol._handlers, lambda why: self._on_bad(transport, why))
+        protocol._receiver = self.receiver  # (no data is handled before this coroutine step ends)
         return transport, protocol

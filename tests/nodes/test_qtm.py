@@ -7,6 +7,8 @@ import socket
 import struct
 import subprocess
 import sys
+import threading
+import time
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -178,3 +180,102 @@ nodes:
     with open(out) as f:
         lat_ms = [float(r["latency_us"]) / 1000 for r in csv.DictReader(f)]
     assert max(lat_ms) < 500, max(lat_ms)  # without the skip the first frames are ~3 s old
+
+
+GARBAGE = {  # what a babbling peer on QTM's port sent, each of which made qtm-rt spin at 100 % CPU
+    "eight zero bytes": b"\x00" * 8,
+    "a size-0 command": struct.pack("<II", 0, 1) + b"x" * 32,
+    "a huge size field": struct.pack("<II", 0xFFFFFFF0, 3) + b"\x00" * 64,
+    "2^32-1 components": struct.pack("<IIqII", 8 + 16 + 8, 3, 0, 1, 0xFFFFFFFF) + struct.pack("<II", 0, 1),
+}
+
+
+def test_qtm_rt_parser_is_guarded_against_framing_no_qtm_sends():
+    from qtm_rt.packet import QRTPacketType
+
+    from nodes.qtm_guard import GuardedReceiver
+
+    for name, data in GARBAGE.items():
+        said = []
+        rx = GuardedReceiver({t: (lambda d: None) for t in QRTPacketType}, said.append)
+        rx.data_received(data)   # returns at once: it spun forever or buffered without end in qtm-rt's own
+        if name == "a huge size field":
+            assert said == ["QTM sent a packet size of 4294967280 bytes"]
+        else:
+            assert said and said[0].startswith("QTM sent"), (name, said)
+
+
+def _garbage_qtm(port: int, payload: bytes, accepted: list):
+    """A peer on QTM's port: the welcome, then garbage, to every client that connects."""
+    server = socket.socket()
+    server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    server.bind(("127.0.0.1", port))
+    server.listen(8)
+    server.settimeout(0.2)
+    welcome = b"QTM RT Interface connected\x00"
+    stop = threading.Event()
+
+    def serve():
+        while not stop.is_set():
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                continue
+            accepted.append(conn)
+            conn.sendall(struct.pack("<II", 8 + len(welcome), 1) + welcome + payload)
+        server.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return stop
+
+
+def test_a_babbling_qtm_is_an_error_and_a_reconnect_not_a_spin(tmp_path):
+    import psutil
+
+    port = free_port()
+    out = tmp_path / "raw.csv"
+    accepted: list = []
+    stop = _garbage_qtm(port, GARBAGE["eight zero bytes"], accepted)
+    try:
+        with launched(tmp_path, _ingest_to_log(port, out)) as g:
+            wait_for(lambda: len(accepted) >= 3, 30, "the ingest to reconnect after the garbage")
+            beat = wait_for(lambda: g.heartbeats().get("qtm"), 20, "the ingest's heartbeat")
+            assert beat.errors.get("qtm_garbage", 0) >= 1, beat
+            cpu = psutil.Process(g.node_pids()["qtm"]).cpu_percent(interval=2.0)
+            assert cpu < 50, f"the ingest spins: {cpu:.0f} % CPU"
+            assert g.proc.poll() is None
+    finally:
+        stop.set()
+        for conn in accepted:
+            conn.close()
+
+
+def test_a_stalled_qtm_is_an_error_and_frames_resume(tmp_path):
+    """QTM stops sending mid-stream without a word (its clock frozen 3 s): the watchdog counts it in the heartbeat
+    and reconnects; frames come again."""
+    port = free_port()
+    out = tmp_path / "raw.csv"
+    with launched(tmp_path, _ingest_to_log(port, out)) as g:
+        with emulator(tmp_path, "--loop", "--stall-at", "300", "--stall-s", "3", port=port):
+            wait_for(lambda: "no frame from QTM" in g.log(), 30, "the watchdog")
+            n = len(log_rows(out))
+            wait_for(lambda: len(log_rows(out)) > n + 100, 30, "frames after the stall")
+            beat = g.heartbeats()["qtm"]
+            assert beat.errors.get("qtm_stall", 0) >= 1, beat
+
+
+def test_frames_resume_within_a_second_of_qtm_coming_back(tmp_path):
+    port = free_port()
+    out = tmp_path / "raw.csv"
+    with launched(tmp_path, _ingest_to_log(port, out)) as g:
+        with emulator(tmp_path, "--loop", port=port) as (sim, _):
+            wait_for(lambda: len(log_rows(out)) > 50, 30, "frames from QTM")
+            sim.kill()
+            sim.wait()
+        time.sleep(5)   # away long enough for any backoff to have grown
+        n = len(log_rows(out))
+        with emulator(tmp_path, "--loop", port=port):
+            back = time.monotonic()   # the emulator listens from here
+            wait_for(lambda: len(log_rows(out)) > n, 10, "frames after QTM came back")
+            assert time.monotonic() - back < 1.0
+        assert g.proc.poll() is None
