@@ -183,6 +183,7 @@ class Launcher:
         self.control.bind(self.control_endpoint)
         self.graph_started = False
         self.stop_requested = False
+        self.exit_code = 0
         self.t0 = time.monotonic()
         self.registry = registry_path(lf.name)
         self.standby: subprocess.Popen | None = None
@@ -259,6 +260,9 @@ class Launcher:
             if verb == b"warm":
                 self.standby_warm = True
                 continue
+            if verb == b"failed" and len(rest) >= 2:
+                self._setup_failed(rest[0].decode(errors="replace"), rest[1].decode(errors="replace"))
+                continue
             if verb != b"ready" or not rest:
                 continue
             node_id = rest[0].decode(errors="replace")  # a stray peer's bytes name no node: ignored, never fatal
@@ -267,6 +271,17 @@ class Launcher:
                     p.ready, p.identity = True, identity
                     if self.graph_started and p.is_source:
                         self.control.send_multipart([identity, b"start"])
+
+    def _setup_failed(self, node_id: str, why: str) -> None:
+        """A node's setup raised. Before the graph has started that is the configuration: stop, say so, exit 2
+        (restarting would fail the same way, forever). Later (a restart) the node is retried with backoff."""
+        if self.graph_started:
+            log.error("node %s could not start again: %s", node_id, why)
+            return
+        log.error("node %s could not start: %s  (fix the launch file, or --set %s.PARAM=VALUE)", node_id, why,
+                  node_id.split("#")[0])
+        self.exit_code = 2
+        self.stop_requested = True
 
     def _maybe_start(self, now: float) -> None:
         """Start the sources once every node is ready and the spare process has done its loading
@@ -345,7 +360,7 @@ class Launcher:
             self.stop()
             for s, h in old.items():
                 signal.signal(s, h)
-        return 0
+        return self.exit_code
 
     def stop(self) -> None:
         if self.standby is not None and self.standby.poll() is None:

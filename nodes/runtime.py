@@ -47,6 +47,12 @@ FLUSH_S = 1.0   # a finished source's last frames still go out
 DRAIN_S = 0.5   # a drain_on_stop node's queued frames still get handled
 SIDE_POLL_S = 0.05  # a running node reads subscription notices and launcher commands this often
 DIAGNOSTICS = "diagnostics"
+SETUP_FAILED = 3  # exit code of a node whose setup raised: the launcher stops a graph that never started
+# What a user's configuration causes (a profile, a file, a port): one line, no traceback. By name, so the runtime
+# depends on no solving module.
+EXPECTED_SETUP_ERRORS = (OSError,)
+EXPECTED_SETUP_ERROR_NAMES = {"ProfileError", "RecordingError", "SubjectError", "BagError", "ConstraintsError",
+                              "ValidationError", "ValueError"}
 # Plain ints: combining pyzmq's enum flags costs microseconds per call on the hot path.
 _NOBLOCK, _MORE, _POLLIN = int(zmq.NOBLOCK), int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.POLLIN)
 
@@ -446,9 +452,23 @@ class NodeLoop:
         self.timer = node_cls.timer_period_s
         self.next_timer = self.started_at + (self.timer or 0)
         self.ready_sent = False
+        self.set_up = False          # setup() returned: teardown() has something to tear down
+        self.said_failed = False
         self.started = self.control is None  # without a launcher, run at once
         self.finished = False
         self.wants_bytes = node_cls.on_raw is not Node.on_raw  # a recorder (hand-offs get encoded for it)
+
+    def setup_failed(self, e: Exception) -> None:
+        """A node that cannot start says why in one line: to the launcher (which stops a graph that never
+        started, rather than restarting the node in a loop) and in its log. A fault of ours keeps its traceback."""
+        text = f"{type(e).__name__}: {e}"
+        if isinstance(e, EXPECTED_SETUP_ERRORS) or type(e).__name__ in EXPECTED_SETUP_ERROR_NAMES:
+            self.ctx.log.error("cannot start: %s", text)
+        else:
+            self.ctx.log.exception("cannot start: %s", text)
+        if self.control is not None:
+            self.control.send_multipart([b"failed", self.spec.id.encode(), text.encode(errors="replace")])
+            self.said_failed = True
 
     def settled(self) -> bool:
         """Started and reported ready: from now on its side sockets need only an occasional look."""
@@ -574,7 +594,8 @@ class NodeLoop:
             if n:
                 ctx.log.info("handled %d queued frames before stopping", n)
         try:
-            self.node.teardown()
+            if self.set_up:
+                self.node.teardown()
         except Exception as e:
             ctx.log.exception("teardown failed: %s", e)
             code = 1
@@ -582,7 +603,7 @@ class NodeLoop:
             final = "finished" if self.finished else ("error" if code else "stopping")
             ctx.send_raw(DIAGNOSTICS, encode(_stamped(ctx, ctx.heartbeat(final, self.started_at))))
         if self.control is not None:
-            self.control.close(linger=0)
+            self.control.close(linger=1000 if self.said_failed else 0)  # why it failed must reach the launcher
         ctx.close(flush_s=FLUSH_S if self.finished else 0.0)
         return code
 
@@ -611,8 +632,6 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
         nonlocal stopping
         stopping = True
 
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
     if zctx is None and len(nodes) > 1:
         zctx = zmq.Context()  # inproc links work only within one context
     loops = [NodeLoop(spec, cls, zctx) for spec, cls in nodes]
@@ -632,7 +651,18 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
     code, current = 0, loops[0]
     try:
         for current in loops:
-            current.node.setup()
+            try:
+                current.node.setup()
+            except KeyboardInterrupt:  # Ctrl-C while starting: the whole process group was asked to stop
+                return 0
+            except Exception as e:
+                current.setup_failed(e)
+                return SETUP_FAILED
+            current.set_up = True
+        # Until here a stop signal ends the process at once (a setup may load kernels for seconds, and has
+        # nothing to flush); from here on it ends the loop, and teardown runs.
+        signal.signal(signal.SIGINT, on_signal)
+        signal.signal(signal.SIGTERM, on_signal)
         # What setup built (a bag's messages, kernels, tables) lives as long as the node: move it out
         # of the collector's sight, so a full collection cannot stall the loop for milliseconds.
         gc.collect()

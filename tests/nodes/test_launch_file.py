@@ -71,3 +71,23 @@ def test_overrides_get_the_files_checks_and_an_alias_bomb_is_refused(tmp_path):
     r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "launch", str(studio), "--plan", "--set",
                         "torso.kind=null"], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "Traceback" not in r.stderr and "torso.kind=null" in r.stderr
+
+
+@pytest.mark.parametrize("override, node, says", [
+    ("hips.profile=nosuch", "hips", "ProfileError: profile 'nosuch' not found (shipped profiles: "),
+    ("source.path=/nonexistent/take.c3d", "source", "RecordingError: /nonexistent/take.c3d: file not found"),
+])
+def test_a_node_that_cannot_start_stops_the_launch_with_one_line(tmp_path, override, node, says):
+    """A mistake only a node's setup can see (a profile name, a missing file): the launch stops with exit 2 and
+    one line naming the node and the fix, instead of restarting the node in a loop with tracebacks."""
+    import os
+
+    env = {**os.environ, "MOCAP_RUN_DIR": str(tmp_path)}
+    t = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "launch", "launch/studio.yaml", "--set", override,
+                        "--set", "viewer.port=0"], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr[-2000:]
+    line = next(x for x in r.stderr.splitlines() if "mocap.launch" in x and "could not start" in x)
+    assert f"node {node} could not start: {says}" in line and f"--set {node}.PARAM=VALUE" in line
+    assert "Traceback" not in r.stderr and "restart" not in r.stderr
+    assert time.monotonic() - t < 60
