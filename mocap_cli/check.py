@@ -4,6 +4,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
 from mocap_core.recordings import Recording, read_recording
 from mocap_core.take_check import (FLOOR_M, TOLERANCE, MarkerGaps, Stretch, marker_gaps, rigid_pairs, spacing_faults,
@@ -37,9 +38,10 @@ def run(args) -> int:
     faults = spacing_faults(rec.positions, rigid_pairs(profile, rec.labels), rec.rate_hz)
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
-    text = report(rec, profile.name, gaps, faults)
+    never = describe_missing(unlocatable(frozenset(profile.landmarks)))
+    text = report(rec, profile.name, gaps, faults, never=never)
     (out / "check.md").write_text(text)
-    print(report(rec, profile.name, gaps[:SHOWN_GAPS], faults, left_out=len(gaps) - SHOWN_GAPS))
+    print(report(rec, profile.name, gaps[:SHOWN_GAPS], faults, left_out=len(gaps) - SHOWN_GAPS, never=never))
     if faults and not args.no_plots:
         from mocap_cli.plots import spacing_plot
 
@@ -48,11 +50,13 @@ def run(args) -> int:
     return 0
 
 
-def report(rec: Recording, profile: str, gaps: list[MarkerGaps], faults: list[Stretch], left_out: int = 0) -> str:
+def report(rec: Recording, profile: str, gaps: list[MarkerGaps], faults: list[Stretch], left_out: int = 0,
+           never: list[str] | None = None) -> str:
     lines = [f"# {_name(rec)}: what its markers do wrong", "",
              f"{rec.n_frames} frames at {rec.rate_hz:g} Hz ({rec.n_frames / rec.rate_hz:.1f} s), profile {profile}.",
-             "",
-             "## Markers lost", ""]
+             "", "## Joints the profile cannot locate", ""]
+    lines += [f"- {line}" for line in never] if never else ["None: its landmarks locate every joint."]
+    lines += ["", "## Markers lost", ""]
     if gaps:
         lines += ["| marker | frames lost | gaps | longest |", "|---|---|---|---|"]
         lines += [f"| {g.label} | {g.lost} ({100 * g.lost / rec.n_frames:.1f} %) | {g.gaps} | {g.longest_s:.2f} s |"

@@ -3,11 +3,12 @@ from __future__ import annotations
 
 
 def register(sub) -> None:
-    from mocap_cli import bag_cmd, calibrate, check, compose, demo, eval_cmd, qtm_sim, solve
+    from mocap_cli import bag_cmd, calibrate, check, compose, demo, eval_cmd, profile_cmd, qtm_sim, solve
 
     solve.add_parser(sub)
     calibrate.add_parser(sub)
     check.add_parser(sub)
+    profile_cmd.add_parser(sub)
     compose.add_parser(sub)
     bag_cmd.add_parser(sub)
     qtm_sim.add_parser(sub)

@@ -11,6 +11,7 @@ from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import Status
@@ -21,7 +22,8 @@ log = logging.getLogger("mocap.solve")
 def add_parser(sub) -> None:
     s = sub.add_parser("solve", help="solve a recording offline into a joints CSV",
                        description="Read a C3D/TRC/MAT recording, locate the joints, fill gaps with IK and "
-                                   "write the joints CSV (DESIGN 'Joints CSV').")
+                                   "write the joints CSV (frame, time, then x, y, z and status of every joint) "
+                                   "and/or a BVH.")
     s.add_argument("file", help="recording: .c3d, .trc or .mat (file.mat:take picks a take)")
     s.add_argument("--profile", default=AUTO, help=PROFILE_HELP)
     s.add_argument("--solver", default="ccd", choices=sorted(SOLVERS), help="IK solver for gaps (default ccd)")
@@ -43,6 +45,8 @@ def add_parser(sub) -> None:
     s.add_argument("--bvh-out", help="output BVH (Y up, metres, T-pose rest; see docs/graph.md)")
     s.add_argument("--bvh-names", choices=sorted(NAMINGS), default="mocap",
                    help="joint names in the BVH: the skeleton model's, or a common rig's (default mocap)")
+    s.add_argument("--allow-missing", action="store_true",
+                   help="solve even when the profile's landmarks cannot locate some joints in any frame")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=run)
 
@@ -52,6 +56,14 @@ def run(args) -> int:
         raise SystemExit("mocap solve: give --joints-out OUT.csv and/or --bvh-out OUT.bvh")
     rec = read_recording(args.file)
     profile = profile_for(args.profile, rec.labels, log)
+    profile.resolve(rec.labels)  # a label the profile names and the take lacks, or several actors: said first
+    never = describe_missing(unlocatable(frozenset(profile.landmarks)))
+    if never and not args.allow_missing:
+        raise SystemExit(f"mocap solve: profile {profile.name} cannot locate these joints in any frame:\n  "
+                         + "\n  ".join(never) + "\nAdd the landmarks to the profile, or give --allow-missing to "
+                         "solve without them.")
+    for line in never:
+        log.warning("never located: %s", line)
     if args.fit or args.subject:
         if args.thesis or args.no_ik:
             raise SystemExit("mocap solve: --fit/--subject is a method of its own; drop --thesis/--no-ik")

@@ -83,7 +83,11 @@ class Profile(BaseModel):
         return f"profile {Path(self.source_file).name or self.name}" + (f" line {line}" if line else "")
 
     def columns(self, labels: list[str]) -> dict[str, int]:
-        """A recording's labels as the profile names them (prefixes stripped if it says so) -> their columns."""
+        """A recording's labels as the profile names them (prefixes stripped if it says so) -> their columns.
+        Several actors in one stream (their labels "actor1:LASI", "actor2:LASI") are refused: one skeleton is
+        solved per stream."""
+        if self.strip_prefixes:
+            one_actor(labels)
         return {strip_prefix(x) if self.strip_prefixes else x: i for i, x in enumerate(labels)}
 
     def markers_of(self, landmark: str) -> list[str]:
@@ -106,6 +110,25 @@ class Profile(BaseModel):
         tracking = [(segment, index[n]) for segment, names in self.tracking.items() for n in names if n in index]
         absent = tuple(n for names in self.tracking.values() for n in names if n not in index)
         return LandmarkMap.build(rows, n_labels=len(labels), tracking=tracking, absent_tracking=absent)
+
+
+def one_actor(labels: list[str]) -> None:
+    several = actors(labels)
+    if len(several) > 1:
+        raise ProfileError(f"the stream holds {len(several)} actors ({', '.join(several)}), and one skeleton is "
+                           f"solved per stream: record or stream each actor on its own (for a file, export one "
+                           f"subject)")
+
+
+def actors(labels: list[str]) -> list[str]:
+    """The subject prefixes ("actor1:" ...) whose labels name the same markers as another prefix's."""
+    by_prefix: dict[str, set[str]] = {}
+    for label in labels:
+        if ":" in label:
+            prefix, name = label.rsplit(":", 1)
+            by_prefix.setdefault(prefix.strip(), set()).add(name.strip())
+    shared = [p for p in by_prefix if any(len(by_prefix[p] & by_prefix[q]) >= 3 for q in by_prefix if q != p)]
+    return sorted(shared)
 
 
 def strip_prefix(label: str) -> str:
@@ -216,6 +239,7 @@ def profile_for(name_or_path: str | None, labels: list[str], log=None) -> Profil
     named in ``log`` when given."""
     if name_or_path not in (AUTO, None):
         return load_profile(name_or_path)
+    one_actor(labels)
     profile = detect_profile(labels)
     if profile is not None and log is not None:
         log.info("profile auto: %s fits the labels (another: --profile NAME or a YAML path)", profile.name)

@@ -21,6 +21,7 @@ from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.marker_gate import MarkerGate
 from mocap_core.pair_guard import PAIR_GUARD_HELP
 from mocap_core.pose_memory import POSE_MEMORY_HELP
+from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
 from mocap_core.segment_rebuild import REBUILD_HELP
 from mocap_core.warmup import warm_up
@@ -76,6 +77,8 @@ class HipInterpolation(Node):
                 self.log.warning("tracking markers %s of profile %s are not in the stream: gaps filled "
                                  "without them", ", ".join(self.map.absent_tracking), self.profile.name)
             self.log.info("profile %s resolved against %d labels", self.profile.name, len(msg.labels))
+            for line in describe_missing(unlocatable(frozenset(self.profile.landmarks))):
+                self.log.warning("never located: %s", line)
         positions, dropped = self.gate.filter(msg.positions, msg.header.capture_time_s)
         for k in np.flatnonzero(dropped):
             self.ctx.bad_input("marker_jump", f"{msg.labels[k]} moved faster than a body can: dropped this frame")

@@ -1,0 +1,98 @@
+"""A newcomer's marker set through the CLI: the profile found from the labels, joints a profile cannot locate
+named with what they need, several actors refused; each with its message and exit code."""
+import subprocess
+import sys
+
+import numpy as np
+
+from mocap_core.recordings import Recording
+from tests.conftest import REPO, data_file
+
+KARATE = "08_cmu_135_02_karate_kata.c3d"
+NO_KNEES = """name: no_knees
+landmarks:
+  SACR: mean(LBWT, RBWT)
+  L_IAS: LFWT
+  R_IAS: RFWT
+  TV2: C7
+  TV12: T10
+  SME: STRN
+  SGL: mean(LFHD, RFHD)
+  L_HEAD: LFHD
+  R_HEAD: RFHD
+  L_SAE: LSHO
+  R_SAE: RSHO
+  L_HLE: LELB
+  R_HLE: RELB
+  L_RSP: LWRA
+  L_USP: LWRB
+  R_RSP: RWRA
+  R_USP: RWRB
+  L_HM2: LFIN
+  R_HM2: RFIN
+  L_FAL: LANK
+  R_FAL: RANK
+  L_FCC: LHEE
+  R_FCC: RHEE
+  L_FM2: LTOE
+  R_FM2: RTOE
+"""
+
+
+def mocap(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "mocap_cli.main", *args], cwd=REPO, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_solve_without_a_profile_uses_the_one_the_labels_fit(tmp_path):
+    r = mocap("solve", str(data_file(KARATE)), "--joints-out", str(tmp_path / "j.csv"), "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "profile auto: cmu41 fits the labels" in r.stderr
+
+
+def test_a_profile_that_cannot_locate_some_joints_is_refused_and_named(tmp_path):
+    profile = tmp_path / "no_knees.yaml"
+    profile.write_text(NO_KNEES)
+    out = tmp_path / "j.csv"
+    r = mocap("solve", str(data_file(KARATE)), "--profile", str(profile), "--joints-out", str(out), "--quiet")
+    assert r.returncode == 1 and not out.exists()
+    assert "knee_l: needs L_FLE (left femur, lateral epicondyle (outside of the knee))" in r.stderr
+    assert "--allow-missing" in r.stderr and "Traceback" not in r.stderr
+    r = mocap("solve", str(data_file(KARATE)), "--profile", str(profile), "--joints-out", str(out), "--quiet",
+              "--allow-missing")
+    assert r.returncode == 0 and "never located: knee_r: needs R_FLE" in r.stderr
+    r = mocap("check", str(data_file(KARATE)), "--profile", str(profile), "--no-plots", "--report", str(tmp_path))
+    assert r.returncode == 0 and "- ankle_l: needs L_FLE" in r.stdout
+
+
+def test_several_actors_in_one_take_are_refused(tmp_path):
+    import ezc3d
+
+    from mocap_core.recordings import read_recording
+
+    rec = read_recording(data_file(KARATE)).slice(0, 120)
+    names = [label.rsplit(":", 1)[-1] for label in rec.labels]
+    both = Recording([f"actor1:{n}" for n in names] + [f"actor2:{n}" for n in names],
+                     np.concatenate([rec.positions, rec.positions + np.float32([3, 0, 0])], axis=1), rec.rate_hz)
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [both.rate_hz]
+    c["parameters"]["POINT"]["LABELS"]["value"] = both.labels
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["m"]
+    pts = np.ones((4, len(both.labels), both.n_frames))
+    pts[:3] = np.transpose(both.positions, (2, 1, 0))
+    c["data"]["points"] = pts
+    path = tmp_path / "two_actors.c3d"
+    c.write(str(path))
+    for profile in ("auto", "cmu41"):
+        r = mocap("solve", str(path), "--profile", profile, "--joints-out", str(tmp_path / "j.csv"), "--quiet")
+        assert r.returncode == 2, (profile, r.stderr)
+        assert "the stream holds 2 actors (actor1, actor2)" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_profile_explain_says_where_each_landmark_is_and_what_it_locates():
+    r = mocap("profile", "explain", "--profile", "cmu41")
+    assert r.returncode == 0, r.stderr
+    text = r.stdout
+    assert "L_FLE   left femur, lateral epicondyle (outside of the knee)" in text
+    block = text[text.index("L_SAE"):text.index("R_SAE")]
+    assert "without it: shoulder_l" in block and "cmu41: LSHO" in block
