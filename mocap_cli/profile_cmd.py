@@ -1,8 +1,13 @@
-"""`mocap profile explain`: the landmarks, where each is on the body, and what each one locates."""
+"""`mocap profile init`: a profile drafted from a recording's labels; `mocap profile explain`: the landmarks,
+where each is on the body, and what each one locates."""
 from __future__ import annotations
 
-from mocap_core.landmark_needs import needed_by, site
-from mocap_core.profiles import LANDMARKS, load_profile
+from pathlib import Path
+
+from mocap_core.landmark_needs import describe_missing, needed_by, site, unlocatable
+from mocap_core.profile_draft import draft_yaml
+from mocap_core.profiles import DEFAULT_UP, LANDMARKS, load_profile
+from mocap_core.recordings import read_recording
 
 
 def add_parser(sub) -> None:
@@ -12,6 +17,12 @@ def add_parser(sub) -> None:
                                         "(with --profile) the labels a profile gives it")
     e.add_argument("--profile", help="a profile to show against the landmarks (a name from profiles/ or a path)")
     e.set_defaults(func=cmd_explain)
+    i = psub.add_parser("init", help="draft a profile for a recording's marker set from the common naming "
+                                     "conventions, every guess commented for you to check")
+    i.add_argument("file", help="recording: .c3d, .trc, .mat (file.mat:take) or a bag")
+    i.add_argument("-o", "--output", required=True, help="the profile to write (YAML)")
+    i.add_argument("--name", help="the profile's name (default: the output file's stem)")
+    i.set_defaults(func=cmd_init)
 
 
 def cmd_explain(args) -> int:
@@ -24,4 +35,22 @@ def cmd_explain(args) -> int:
         if profile is not None:
             line += f"\n        {profile.name}: {profile.landmarks.get(name, '(not in the profile)')}"
         print(line)
+    return 0
+
+
+def cmd_init(args) -> int:
+    rec = read_recording(args.file)
+    out = Path(args.output)
+    if out.exists():
+        raise SystemExit(f"mocap profile init: {out} exists; give another -o (a draft never overwrites)")
+    text = draft_yaml(args.name or out.stem, rec.labels, rec.meta.get("up_axis", DEFAULT_UP), Path(rec.source).name)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    profile = load_profile(out)  # the draft is a valid profile, and resolves against its recording
+    profile.resolve(rec.labels)
+    print(f"wrote {out}: {len(profile.landmarks)} of {len(LANDMARKS)} landmarks guessed from {len(rec.labels)} labels")
+    never = describe_missing(unlocatable(frozenset(profile.landmarks)))
+    print("Every joint can be located with it." if not never else
+          "Joints it cannot locate yet:\n  " + "\n  ".join(never))
+    print(f"Check each guess in {out}, then: mocap solve {args.file} --profile {out} --joints-out out.csv")
     return 0

@@ -4,6 +4,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from mocap_core.recordings import Recording
 from tests.conftest import REPO, data_file
@@ -96,3 +97,28 @@ def test_profile_explain_says_where_each_landmark_is_and_what_it_locates():
     assert "L_FLE   left femur, lateral epicondyle (outside of the knee)" in text
     block = text[text.index("L_SAE"):text.index("R_SAE")]
     assert "without it: shoulder_l" in block and "cmu41: LSHO" in block
+
+
+TAKES = ["02_qualisys_walking_ezc3d_Qualisys.c3d", "03_sprint_start_BTK_SprintMotion.trc", KARATE,
+         "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d", "13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"]
+
+
+@pytest.mark.parametrize("take", TAKES)
+def test_profile_init_drafts_a_profile_that_locates_what_the_shipped_one_does(tmp_path, take):
+    """No edits: the draft, as written, locates at least 90 % of the joint-frames the shipped profile locates."""
+    from mocap_core.localization import Localizer
+    from mocap_core.profiles import detect_profile, load_profile
+    from mocap_core.recordings import read_recording
+
+    out = tmp_path / "draft.yaml"
+    r = mocap("profile", "init", str(data_file(take)), "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    rec = read_recording(data_file(take))
+    positions = rec.positions[:1200].astype(float)
+    located = {}
+    for name, profile in (("draft", load_profile(out)), ("shipped", detect_profile(rec.labels))):
+        lm = profile.resolve(rec.labels).apply(positions)
+        located[name] = int((Localizer(profile.body).localize(lm).status != 0).sum())
+    assert located["draft"] >= 0.9 * located["shipped"], located
+    assert "# Not found" in out.read_text() and "guessed from" in out.read_text()
+    assert mocap("profile", "init", str(data_file(take)), "-o", str(out)).returncode == 1   # never overwrites
