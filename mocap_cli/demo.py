@@ -20,12 +20,12 @@ def add_parser(sub) -> None:
     s = sub.add_parser("demo", help="run the full graph on a built-in take, with the live viewer",
                        description="Launch launch/demo.yaml: a synthetic running take in the PAF marker set "
                                    "(made on the fly: no recording needed) through every node, with the web viewer; "
-                                   "--launch launch/studio.yaml runs a real Vicon take instead. Runs the take once "
-                                   "(--loop to repeat until Ctrl-C, --seconds to stop earlier), then prints "
-                                   "frames, latency and how many joints IK estimated.")
+                                   "--launch launch/studio.yaml runs a real Vicon take instead. Repeats the take until Ctrl-C "
+                                   "(--once: one pass; --seconds: stop earlier), then prints frames, latency and "
+                                   "how many joints IK estimated.")
     s.add_argument("--launch", default=str(DEMO_LAUNCH), help="launch file (default launch/demo.yaml)")
     s.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a node param")
-    s.add_argument("--loop", action="store_true", help="replay the take until Ctrl-C")
+    s.add_argument("--once", action="store_true", help="one pass of the take, then stop")
     s.add_argument("--seconds", type=float, help="stop after this many seconds")
     s.add_argument("--port", type=int, default=8090, help="viewer port (default 8090)")
     s.set_defaults(func=run)
@@ -34,11 +34,14 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     out = Path(tempfile.mkdtemp(prefix="mocap-demo-")) / "solved.csv"
     overrides = list(args.set or []) + [f"log.path={out}", f"viewer.port={args.port}"]
-    overrides += ["source.loop=true"] if args.loop else []
+    overrides += [] if args.once else ["source.loop=true"]
     lf = load_launch_file(args.launch, overrides)
     lf.name = "demo"
-    print(f"viewer: http://127.0.0.1:{args.port}/   (Ctrl-C stops the graph)", flush=True)
-    Launcher(lf, args.launch).run(duration_s=args.seconds, until_done=not args.loop)
+
+    def serving():  # said when the viewer serves, not before a first run's compile
+        print(f"\nviewer: http://127.0.0.1:{args.port}/   (Ctrl-C stops the graph)\n", flush=True)
+
+    Launcher(lf, args.launch, on_ready=serving).run(duration_s=args.seconds, until_done=args.once)
     if not out.exists():
         log.error("no frame reached skeleton/solved")
         return 1

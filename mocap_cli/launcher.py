@@ -167,9 +167,10 @@ def _endpoint_for(sub: Proc, pub: Proc) -> str:
 
 
 class Launcher:
-    def __init__(self, lf: LaunchFile, launch_path: str = ""):
+    def __init__(self, lf: LaunchFile, launch_path: str = "", on_ready=None):
         self.lf = lf
         self.launch_path = launch_path
+        self.on_ready = on_ready  # called once, when every node is ready and the sources start
         self.sock_dir = tempfile.mkdtemp(prefix=f"mocap-{lf.name[:20]}-", dir="/tmp")
         if lf.transport.kind == "tcp":
             self.control_endpoint = f"tcp://{lf.transport.host}:{lf.transport.base_port}"
@@ -293,6 +294,8 @@ class Launcher:
             return
         self.graph_started = True
         log.info("graph %s ready in %.0f ms: starting sources", self.lf.name, (now - self.t0) * 1000)
+        if self.on_ready is not None:
+            self.on_ready()
         for n in self.procs:
             if n.is_source and n.identity:
                 self.control.send_multipart([n.identity, b"start"])
