@@ -2,7 +2,8 @@
 in red (as in thesis Figure 4.4), held joints in orange, bones, and a panel of every node's rate,
 latency and drops from the heartbeats. One self-contained page (canvas, no library, nothing from a
 CDN) that polls ``/state``; ``/events`` streams the same as Server-Sent Events at up to ``max_fps``.
-Drag to orbit, wheel to zoom.
+Drag to orbit, wheel to zoom. On loopback it answers only to 127.0.0.1 and localhost (no DNS rebinding); at
+most 32 clients at once, each let go after 10 s of silence.
 """
 from __future__ import annotations
 
@@ -20,6 +21,31 @@ from mocap_core.world import DEFAULT_UP, to_canonical
 from nodes.runtime import Node
 
 PAGE = Path(__file__).with_name("viewer.html")
+
+
+LOOPBACK = {"127.0.0.1", "localhost", "::1"}
+CLIENT_TIMEOUT_S = 10.0
+MAX_CLIENTS = 32  # browser tabs and scripts; more at once are turned away, not given a thread each
+
+
+class _BoundedServer(ThreadingHTTPServer):
+    daemon_threads = True
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.slots = threading.BoundedSemaphore(MAX_CLIENTS)
+
+    def process_request(self, request, client_address):
+        if not self.slots.acquire(blocking=False):
+            self.shutdown_request(request)
+            return
+        super().process_request(request, client_address)
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self.slots.release()
 
 
 class Params(BaseModel):
@@ -40,11 +66,19 @@ class Viewer(Node):
         self.cond = threading.Condition()
         viewer = self
 
+        loopback = self.params.host in LOOPBACK
+
         class Handler(BaseHTTPRequestHandler):
+            timeout = CLIENT_TIMEOUT_S  # a client that sends nothing, or stops reading, is let go
+
             def log_message(self, *args):
                 pass
 
             def do_GET(self):
+                host = (self.headers.get("Host") or "").rsplit(":", 1)[0].strip("[]")
+                if loopback and host not in LOOPBACK:  # another name for this address: DNS rebinding
+                    self.send_error(403, "this viewer answers to 127.0.0.1 and localhost only")
+                    return
                 if self.path in ("/", "/index.html"):
                     body = PAGE.read_bytes()
                     self.send_response(200)
@@ -67,8 +101,7 @@ class Viewer(Node):
                 else:
                     self.send_error(404)
 
-        self.server = ThreadingHTTPServer((self.params.host, self.params.port), Handler)
-        self.server.daemon_threads = True
+        self.server = _BoundedServer((self.params.host, self.params.port), Handler)
         self.url = f"http://{self.params.host}:{self.server.server_address[1]}/"
         threading.Thread(target=self.server.serve_forever, daemon=True).start()
         self.log.info("viewer at %s", self.url)

@@ -96,6 +96,8 @@ class VmcOutput(Node):
     def setup(self) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.address = (self.params.host, self.params.port)
+        if self.params.host in ("127.0.0.1", "localhost"):
+            self.sock.bind(("127.0.0.1", 0))  # else the first send binds every interface
         self.t0 = time.monotonic()
         self.cap = RateCap(self.params.max_rate_hz)
 

@@ -257,3 +257,36 @@ def test_foxglove_websocket_streams_an_upright_skeleton(tmp_path):
     assert len(spheres) >= 20 and len(scene.entities[0].lines[0].points) >= 40
     z = [s.pose.position.z for s in spheres]
     assert z[5] - z[0] > 0.4   # head above pelvis: Foxglove's world is Z up (this take is Z up too)
+
+
+def test_viewer_refuses_other_host_names_and_bounds_its_clients(tmp_path):
+    """DNS rebinding: a page from another name that resolves to 127.0.0.1 gets 403. 100 idle connections get no
+    thread each: past 32 they are turned away, and the viewer still answers."""
+    import http.client
+
+    import psutil
+
+    port = free_port()
+    graph = f"""nodes:
+  - {{id: source, kind: synthetic_source, params: {{frames: 0}}}}
+  - {{id: viewer, kind: viewer, params: {{port: {port}}}}}
+"""
+    with launched(tmp_path, graph) as g:
+        wait_for(lambda: _get(f"http://127.0.0.1:{port}/state"), 30, "the viewer")
+
+        def status(host):
+            c = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+            c.request("GET", "/state", headers={"Host": host})
+            return c.getresponse().status
+
+        assert status(f"127.0.0.1:{port}") == 200 and status(f"localhost:{port}") == 200
+        assert status(f"evil.example:{port}") == 403
+        idle = [socket.create_connection(("127.0.0.1", port)) for _ in range(100)]
+        try:
+            time.sleep(1.0)
+            threads = psutil.Process(g.node_pids()["viewer"]).num_threads()
+            assert threads < 60, threads
+        finally:
+            for s in idle:
+                s.close()
+        wait_for(lambda: _get(f"http://127.0.0.1:{port}/state"), 10, "the viewer to answer again")
