@@ -39,6 +39,9 @@ class Recording:
                          self.first_frame + start, self.meta)
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def _finish(labels, xyz_units: np.ndarray, units: str, rate: float, source: str, first_frame=0, meta=None):
     scale = UNIT_SCALE.get(units.strip().lower())
     if scale is None:
@@ -47,7 +50,7 @@ def _finish(labels, xyz_units: np.ndarray, units: str, rate: float, source: str,
     if pos.ndim != 3 or pos.shape[0] == 0:
         raise RecordingError(f"{source}: no frames")
     pos[np.all(pos == 0.0, axis=2)] = np.nan
-    pos[~np.isfinite(pos).all(axis=2)] = np.nan  # an infinite coordinate is no position: occluded
+    pos[~(np.abs(pos) < FLOAT32_MAX).all(axis=2)] = np.nan  # infinite, or past float32: no position, occluded
     if not rate or not np.isfinite(rate) or rate <= 0:
         raise RecordingError(f"{source}: bad capture rate {rate!r}")
     if len(set(labels)) != len(labels):
@@ -56,7 +59,49 @@ def _finish(labels, xyz_units: np.ndarray, units: str, rate: float, source: str,
     return Recording(list(labels), pos.astype(np.float32), float(rate), source, first_frame, meta or {})
 
 
+C3D_TIMEOUT_S = 20.0  # and 1 s per MB: a C3D is read at over 10 MB/s
+
+
 def read_c3d(path: Path) -> Recording:
+    """ezc3d reads it in a forked child: some corrupt files crash ezc3d (a segfault would take the caller with it)
+    or make it loop; the child's death or a timeout becomes a RecordingError naming the file."""
+    import multiprocessing
+
+    timeout = C3D_TIMEOUT_S + path.stat().st_size / 1e6
+    parent_end, child_end = multiprocessing.Pipe(duplex=False)
+    child = multiprocessing.get_context("fork").Process(target=_c3d_child, args=(path, child_end), daemon=True)
+    child.start()
+    child_end.close()
+    try:
+        if not parent_end.poll(timeout):
+            child.kill()
+            raise RecordingError(f"{path}: reading the C3D file did not finish in {timeout:.0f} s (corrupt file?)")
+        try:
+            kind, value = parent_end.recv()
+        except EOFError:  # the child died without a word
+            child.join(5)
+            raise RecordingError(f"{path}: the C3D reader crashed on this file (exit {child.exitcode}): it is "
+                                 f"corrupt") from None
+    finally:
+        parent_end.close()
+        child.join(5)
+    if kind == "error":
+        raise RecordingError(value)
+    return value
+
+
+def _c3d_child(path: Path, out) -> None:
+    try:
+        out.send(("ok", _read_c3d(path)))
+    except RecordingError as e:
+        out.send(("error", str(e)))
+    except Exception as e:  # anything else of ezc3d's on a bad file
+        out.send(("error", f"{path}: not a readable C3D file ({type(e).__name__}: {e})"))
+    finally:
+        out.close()
+
+
+def _read_c3d(path: Path) -> Recording:
     import ezc3d
 
     try:
@@ -73,7 +118,7 @@ def read_c3d(path: Path) -> Recording:
         rate = float(point["RATE"]["value"][0])
         pts = np.asarray(c["data"]["points"])          # (4, markers, frames)
         residual = np.asarray(c["data"]["meta_points"]["residuals"])  # (1, markers, frames)
-    except (KeyError, IndexError) as e:
+    except (KeyError, IndexError, ValueError, TypeError) as e:
         raise RecordingError(f"{path}: C3D file lacks the POINT parameters ({e})") from None
     labels = labels[: pts.shape[1]]
     xyz = np.transpose(pts[:3], (2, 1, 0)).astype(np.float64)
