@@ -171,11 +171,10 @@ class Launcher:
         self.lf = lf
         self.launch_path = launch_path
         self.on_ready = on_ready  # called once, when every node is ready and the sources start
-        self.sock_dir = tempfile.mkdtemp(prefix=f"mocap-{lf.name[:20]}-", dir="/tmp")
-        if lf.transport.kind == "tcp":
-            self.control_endpoint = f"tcp://{lf.transport.host}:{lf.transport.base_port}"
-        else:
-            self.control_endpoint = f"ipc://{self.sock_dir}/control"
+        self.sock_dir = tempfile.mkdtemp(prefix=f"mocap-{lf.name[:20]}-", dir="/tmp")  # 0700: the user's only
+        # The launcher's own processes are all on this host, whatever the transport: its control socket is an ipc
+        # path in that directory, which no other user can open (over tcp anyone could say "ready").
+        self.control_endpoint = f"ipc://{self.sock_dir}/control"
         self.procs = plan(lf, self.sock_dir, self.control_endpoint)
         self.processes = group(self.procs)
         self.zctx = zmq.Context()

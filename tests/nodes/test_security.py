@@ -1,4 +1,5 @@
 """CURVE on tcp links: a subscriber without an authorized key receives nothing; everything on loopback."""
+import os
 import socket
 import time
 
@@ -57,6 +58,12 @@ nodes:
         # the graph's own tools carry the keys
         echo = g.cli("topic", "echo", "markers/raw", "--once", "--timeout", "5")
         assert echo.returncode == 0 and "mocap.MarkerFrame" in echo.stdout
+        # the launcher's control socket is not on tcp, where anyone could say "ready": an ipc path in a folder
+        # only this user can open
+        control = g.registry()["control"]
+        assert control.startswith("ipc://")
+        folder = os.path.dirname(control[len("ipc://"):])
+        assert os.stat(folder).st_mode & 0o777 == 0o700
 
 
 def test_default_transport_is_private(tmp_path):
