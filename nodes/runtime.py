@@ -157,6 +157,7 @@ class NodeContext:
         self.errors: collections.Counter[str] = collections.Counter()
         self.last_error = ""
         self._wire = {t: spec.wire_topic(t) for t in {**self.subscribes, **self.publishes}}
+        self._written = [spec.wire_topic(t).encode() for t in self.publishes] + [DIAGNOSTICS.encode()]
         self._logical = {w: t for t, w in self._wire.items() if t in self.subscribes}
         self.pub: zmq.Socket | None = None
         self.sub: zmq.Socket | None = None
@@ -245,12 +246,12 @@ class NodeContext:
                 note = self.pub.recv(zmq.NOBLOCK)
             except zmq.Again:
                 return
-            if note[:1] == b"\x01":
-                self._subscriptions[note[1:]] += 1
-            elif note[:1] == b"\x00":
-                self._subscriptions[note[1:]] -= 1
-            else:
+            kind, topic = note[:1], note[1:]
+            if kind not in (b"\x01", b"\x00"):
                 continue
+            if not any(w.startswith(topic) for w in self._written):
+                continue  # no message of ours would match it: not worth a counter (a peer may send thousands)
+            self._subscriptions[topic] += 1 if kind == b"\x01" else -1
             self._outside.clear()
 
     def _has_outside(self, wire: str) -> bool:
