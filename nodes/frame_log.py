@@ -24,7 +24,7 @@ class FrameLog(Node):
     def setup(self):
         Path(self.params.path).parent.mkdir(parents=True, exist_ok=True)
         self.file = open(self.params.path, "w")
-        self.file.write("frame,seq,publisher,schema,latency_us,estimated,held,missing\n")
+        self.file.write("frame,seq,publisher,schema,latency_us,estimated,held,missing,received_ns\n")
 
     def on_message(self, topic, msg):
         # Latency at arrival (before decoding), as a bare pyzmq sink measures it.
@@ -36,7 +36,8 @@ class FrameLog(Node):
             counts = f"{int((status == 2).sum())},{int((status == 3).sum())},{int((status == 0).sum())}"
         else:
             counts = ",,"
-        self.file.write(f"{h.frame},{h.seq},{h.publisher},{h.schema_name},{latency_us},{counts}\n")
+        self.file.write(f"{h.frame},{h.seq},{h.publisher},{h.schema_name},{latency_us},{counts},"
+                        f"{self.ctx.received_ns}\n")
 
     def on_timer(self):
         self.file.flush()
