@@ -7,6 +7,7 @@ import numpy as np
 
 from mocap_core.fit.calibration import calibrate
 from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
+from mocap_core.warmup import ensure_compiled
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import JOINTS
 
@@ -28,6 +29,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     rec = read_recording(args.file)
+    ensure_compiled(log)
     if args.seconds:
         rec = rec.slice(0, max(1, int(args.seconds * rec.rate_hz)))
     profile = profile_for(args.profile, rec.labels, log)

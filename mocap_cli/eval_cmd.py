@@ -22,7 +22,7 @@ from mocap_core.pair_guard import PAIR_GUARD_HELP
 from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.partial_means import PartialMeans
 from mocap_core.segment_rebuild import REBUILD_HELP
-from mocap_core.warmup import warm_up
+from mocap_core.warmup import ensure_compiled, warm_up
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_TAKE = str(REPO.parent / "shared" / "data" / "03_sprint_start_BTK_SprintMotion.trc")
@@ -149,6 +149,7 @@ def run_timing(args) -> int:
     solvers = list(SOLVERS) if args.solvers == "all" else args.solvers.split(",")
     modes = {"on": [True], "off": [False], "both": [False, True]}[args.constraints]
     t0 = time.perf_counter()
+    ensure_compiled(log)
     warm_up()
     warmup_s = time.perf_counter() - t0
     rows = []
@@ -214,6 +215,7 @@ def run_gaps(args) -> int:
     solvers = list(SOLVERS) if args.solvers == "all" else args.solvers.split(",")
     modes = ["markers", "joint"] if args.mode == "both" else [args.mode]
     cons = {"on": [True], "off": [False], "both": [False, True]}[args.constraints]
+    ensure_compiled(log)
     warm_up()
     runs = []
     tracking = pipe.landmark_map.tracking(rec.positions)  # the same for every run
@@ -301,6 +303,7 @@ def run_real_gaps(args) -> int:
     variants = {"thesis's method": (False, None),
                 "studio options without the blend": (True, BEYOND_THESIS | {"blend_half_life_s": 0.0}),
                 "studio options": (True, BEYOND_THESIS)}
+    ensure_compiled(log)
     warm_up()
     results, solved = {}, {}
     for name, (beyond, options) in tqdm(variants.items(), desc="solving", unit="variant"):

@@ -231,12 +231,11 @@ class Launcher:
         })
 
     def start(self) -> None:
-        from mocap_core.warmup import compile_kernels, kernels_cached
+        from mocap_core.warmup import ensure_compiled, kernels_cached
 
         if not kernels_cached():  # else every node process would compile the same kernels at once
-            log.info("compiling the numba kernels for this checkout, once (1-2 minutes on 2 cores)...")
             try:
-                log.info("numba kernels compiled and cached in %.0f s", compile_kernels())
+                ensure_compiled(log)
             except subprocess.CalledProcessError as e:
                 if self.stop_requested:  # Ctrl-C during the compile
                     return

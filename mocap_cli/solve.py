@@ -13,6 +13,7 @@ from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
+from mocap_core.warmup import ensure_compiled
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import Status
 
@@ -55,6 +56,7 @@ def run(args) -> int:
     if not args.joints_out and not args.bvh_out:
         raise SystemExit("mocap solve: give --joints-out OUT.csv and/or --bvh-out OUT.bvh")
     rec = read_recording(args.file)
+    ensure_compiled(log)
     profile = profile_for(args.profile, rec.labels, log)
     profile.resolve(rec.labels)  # a label the profile names and the take lacks, or several actors: said first
     never = describe_missing(unlocatable(frozenset(profile.landmarks)))

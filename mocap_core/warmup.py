@@ -28,11 +28,22 @@ PARTS = ("localization", "rebuild", "pose_memory", "pair_guard", "ccd", "fabrik"
          "fit")
 
 
-def warm_up(parts: tuple[str, ...] = PARTS) -> None:
+def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False) -> None:
     for part in parts:
         _warm(part)
+        if say:  # progress for whoever waits on a first compile
+            print(f"  kernels: {part} ready", file=sys.stderr, flush=True)
     if tuple(parts) == PARTS:
         _write_stamp()
+
+
+def ensure_compiled(log) -> None:
+    """Before a command's first frame: compile the kernels up front, in parallel and saying so, when this
+    checkout has not yet (else the first frames would sit compiling, one process, in silence)."""
+    if kernels_cached():
+        return
+    log.info("compiling the numba kernels for this checkout, once (about 2 minutes on 2 cores)...")
+    log.info("numba kernels compiled and cached in %.0f s", compile_kernels())
 
 
 def _warm(part: str) -> None:
@@ -141,8 +152,8 @@ def compile_kernels(workers: int | None = None) -> float:
     started = time.monotonic()
     workers = max(1, min(workers or os.cpu_count() or 1, len(PARTS)))
     groups = [PARTS[i::workers] for i in range(workers)]
-    procs = [subprocess.Popen([sys.executable, "-c", f"from mocap_core.warmup import warm_up; warm_up({g!r})"])
-             for g in groups]
+    procs = [subprocess.Popen([sys.executable, "-c",
+                               f"from mocap_core.warmup import warm_up; warm_up({g!r}, say=True)"]) for g in groups]
     for p in procs:
         if p.wait():
             raise subprocess.CalledProcessError(p.returncode, p.args)
