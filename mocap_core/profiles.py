@@ -171,7 +171,7 @@ class LandmarkMap:
 
     def tracking(self, markers: np.ndarray) -> np.ndarray:
         """markers (..., n_labels, 3) -> the tracking markers (..., n_tracking, 3), float64."""
-        return markers[..., self.tracking_idx, :].astype(np.float64)
+        return np.ascontiguousarray(markers[..., self.tracking_idx, :], dtype=np.float64)
 
     def present(self) -> set[str]:
         return {LANDMARKS[i] for i in np.flatnonzero(self.count)}
@@ -186,7 +186,7 @@ class LandmarkMap:
         with np.errstate(invalid="ignore", divide="ignore"):
             out = summed / self.count[:, None]
         out[..., self.count == 0, :] = np.nan
-        return out
+        return np.ascontiguousarray(out)  # the gather's strides differ: the kernels are compiled for C order only
 
 
 def load_profile(name_or_path: str | Path) -> Profile:

@@ -75,6 +75,14 @@ def _warm(part: str) -> None:
         lm = rng.normal(size=(len(LANDMARKS), 3))
         lm[LANDMARK_INDEX["L_FAL"]] = np.nan
         hinge.fill(lm, upper)
+        from mocap_core.partial_means import PartialMeans  # (the rebuild's third: landmarks that are means)
+        from mocap_core.profiles import load_profile
+
+        profile = load_profile("qualisys_sports")  # SACR is a mean of two markers there
+        labels = sorted({n for landmark in profile.landmarks for n in profile.markers_of(landmark)})
+        means = PartialMeans(profile.resolve(labels))
+        markers = rng.normal(size=(len(labels), 3))
+        means.fill(markers, np.full((len(LANDMARKS), 3), np.nan))
         return
     if part == "pose_memory":  # one call compiles the whole kernel, recall included
         from mocap_core.pose_memory import PoseMemory
