@@ -25,7 +25,8 @@ def add_parser(sub) -> None:
                        description="Read a C3D/TRC/MAT recording, locate the joints, fill gaps with IK and "
                                    "write the joints CSV (frame, time, then x, y, z and status of every joint) "
                                    "and/or a BVH.")
-    s.add_argument("file", help="recording: .c3d, .trc or .mat (file.mat:take picks a take)")
+    s.add_argument("file", nargs="+", help="recording: .c3d, .trc, .mat (file.mat:take picks a take) or a bag; "
+                                          "several, folders or globs with --out-dir (an archive re-solve)")
     s.add_argument("--profile", default=AUTO, help=PROFILE_HELP)
     s.add_argument("--solver", default="ccd", choices=sorted(SOLVERS), help="IK solver for gaps (default ccd)")
     s.add_argument("--no-constraints", action="store_true", help="solve without joint limits")
@@ -49,12 +50,33 @@ def add_parser(sub) -> None:
     s.add_argument("--allow-missing", action="store_true",
                    help="solve even when the profile's landmarks cannot locate some joints in any frame")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
+    a = s.add_argument_group("several takes (an archive)")
+    a.add_argument("--out-dir", help="write each take's TAKE.csv (and TAKE.bvh with --bvh) here")
+    a.add_argument("--bvh", action="store_true", help="with --out-dir: a BVH per take too")
+    a.add_argument("--jobs", type=int, help="takes solved at once in local processes (default: one per core)")
+    a.add_argument("--cluster", metavar="ADDRESS",
+                   help="solve on a Dask cluster instead: its scheduler's address (tcp://host:8786), or 'local' "
+                        "for a local one (needs dask[distributed]; every worker must see the files)")
     s.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from mocap_cli.archive import expand, solve_archive
+
+    takes = expand(args.file)
+    if args.out_dir:
+        return solve_archive(takes, args)
+    if len(takes) > 1:
+        raise SystemExit(f"mocap solve: {len(takes)} takes: give --out-dir DIR for their outputs")
+    args.file = takes[0]
     if not args.joints_out and not args.bvh_out:
         raise SystemExit("mocap solve: give --joints-out OUT.csv and/or --bvh-out OUT.bvh")
+    solve_take(args)
+    return 0
+
+
+def solve_take(args) -> dict:
+    """One take, as the arguments say; returns what it counted (frames, per-status shares, seconds)."""
     rec = read_recording(args.file)
     ensure_compiled(log)
     profile = profile_for(args.profile, rec.labels, log)
@@ -121,4 +143,5 @@ def _write(args, rec, profile, chunks) -> int:
     log.info("%d frames in %.1f s (%.0f frames/s): %s -> %s", rec.n_frames, took, rec.n_frames / took,
              ", ".join(f"{s.name.lower()} {100 * c / total:.1f}%" for s, c in counts.items()),
              " and ".join(x for x in (args.joints_out, args.bvh_out) if x))
-    return 0
+    return {"frames": rec.n_frames, "seconds": took,
+            **{s.name.lower(): counts[s] / max(total, 1) for s in Status}}

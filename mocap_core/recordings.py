@@ -6,6 +6,7 @@ the labels, and the capture rate. A truncated or corrupt file raises :class:`Rec
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -64,41 +65,54 @@ C3D_TIMEOUT_S = 20.0  # and 1 s per MB: a C3D is read at over 10 MB/s
 
 def read_c3d(path: Path) -> Recording:
     """ezc3d reads it in a forked child: some corrupt files crash ezc3d (a segfault would take the caller with it)
-    or make it loop; the child's death or a timeout becomes a RecordingError naming the file."""
-    import multiprocessing
+    or make it loop; the child's death or a timeout becomes a RecordingError naming the file. (os.fork, not
+    multiprocessing: it works in daemonic processes too, a Dask worker's say.)"""
+    import os
+    import pickle
+    import select
+    import signal
 
     timeout = C3D_TIMEOUT_S + path.stat().st_size / 1e6
-    parent_end, child_end = multiprocessing.Pipe(duplex=False)
-    child = multiprocessing.get_context("fork").Process(target=_c3d_child, args=(path, child_end), daemon=True)
-    child.start()
-    child_end.close()
-    try:
-        if not parent_end.poll(timeout):
-            child.kill()
-            raise RecordingError(f"{path}: reading the C3D file did not finish in {timeout:.0f} s (corrupt file?)")
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: read, send the result (or the error) back, and leave without cleaning up
+        os.close(read_end)
         try:
-            kind, value = parent_end.recv()
-        except EOFError:  # the child died without a word
-            child.join(5)
-            raise RecordingError(f"{path}: the C3D reader crashed on this file (exit {child.exitcode}): it is "
-                                 f"corrupt") from None
+            payload = ("ok", _read_c3d(path))
+        except RecordingError as e:
+            payload = ("error", str(e))
+        except Exception as e:  # anything else of ezc3d's on a bad file
+            payload = ("error", f"{path}: not a readable C3D file ({type(e).__name__}: {e})")
+        with os.fdopen(write_end, "wb") as out:
+            out.write(pickle.dumps(payload, protocol=pickle.HIGHEST_PROTOCOL))
+        os._exit(0)
+    os.close(write_end)
+    chunks, deadline = [], time.monotonic() + timeout
+    try:
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([read_end], [], [], left)[0]:
+                os.kill(pid, signal.SIGKILL)
+                raise RecordingError(f"{path}: reading the C3D file did not finish in {timeout:.0f} s (corrupt file?)")
+            chunk = os.read(read_end, 1 << 20)
+            if not chunk:
+                break
+            chunks.append(chunk)
     finally:
-        parent_end.close()
-        child.join(5)
+        os.close(read_end)
+        _, status = os.waitpid(pid, 0)
+    if not chunks:
+        raise RecordingError(f"{path}: the C3D reader crashed on this file ({_how(status)}): it is corrupt")
+    kind, value = pickle.loads(b"".join(chunks))
     if kind == "error":
         raise RecordingError(value)
     return value
 
 
-def _c3d_child(path: Path, out) -> None:
-    try:
-        out.send(("ok", _read_c3d(path)))
-    except RecordingError as e:
-        out.send(("error", str(e)))
-    except Exception as e:  # anything else of ezc3d's on a bad file
-        out.send(("error", f"{path}: not a readable C3D file ({type(e).__name__}: {e})"))
-    finally:
-        out.close()
+def _how(status: int) -> str:
+    import os
+
+    return f"signal {os.WTERMSIG(status)}" if os.WIFSIGNALED(status) else f"exit {os.WEXITSTATUS(status)}"
 
 
 def _read_c3d(path: Path) -> Recording:
