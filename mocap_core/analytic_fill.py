@@ -27,15 +27,12 @@ MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint
 # Where on the swivel circle: the bone's direction in the next joint's frame nearest its usual one,
 # every component weighted by 1 / (its variance + SD_FLOOR^2), plus TURN_WEIGHT per squared radian
 # of turn from the carried bend direction (which only settles near-ties). Leaning on the steadiest
-# component alone (the forearm along the hand, SD 0.005) failed whenever the wrist flexed: the
-# dance set's elbows, hidden from 1 s, were 18-76 mm off on average, 66-228 mm at worst; with all
-# three weighted, 10-54 / 33-264 mm (dance1 left 16 / 55, right 41 -> 10 mean).
+# component alone (the forearm along the hand) fails whenever the wrist flexes; all three weighted hold.
 SD_FLOOR = 0.02
 TURN_WEIGHT = 1.0
 FIT_STEPS = 360     # a coarse pass over the whole circle (1 degree), then a fine one around the best
 # With the limb memory (mocap_core.limb_memory) on, the joint is also pulled towards where the earlier
-# poses had it, as if that point were this far off (SD, metres). Dance set, elbows hidden from 1 s
-# (prototype): 0.017 m left dance2 and walk2 at 19-34 mm mean, 0.0095 at 14-36, 0.0055 at 12-39.
+# poses had it, as if that point were this far off (SD, metres): about a joint centre's own uncertainty.
 MEMORY_SD = 0.01
 # How far a lost joint's frame turns with the plane of its two bones (shape_turn): not at all below a bend of
 # STRAIGHT_SIN (about 3 degrees), wholly from STRAIGHT_SIN + PLANE_RANGE (17 degrees). Nearly straight, the plane is
@@ -163,9 +160,8 @@ def shape_turn(first_before, second_before, first, second):
     rolled = mv(least, _plane_frame(first_before, second_before)[:, 1].copy())
     plane_y = _plane_frame(first, second)[:, 1].copy()
     roll = angle_about(axis, rolled, plane_y)
-    # a plane, not a side of it: a lone joint that crosses its neighbours' line between two frames (a wrist bent
-    # 6 degrees with a 47 mm hand, 5 mm aside) flips its bend's side, not its bone by a half turn (the Vicon
-    # take's right wrist turned 180 degrees in a frame at frame 945 so); no bone rolls 90 degrees in a frame
+    # a plane, not a side of it: a lone joint that crosses its neighbours' line between two frames (a nearly
+    # straight wrist) flips its bend's side, not its bone by a half turn; no bone rolls 90 degrees in a frame
     if roll > 0.5 * math.pi:
         roll -= math.pi
     elif roll < -0.5 * math.pi:

@@ -238,8 +238,7 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
         across = (raw - seen_raw[k, kind]) / since  # and its step since then
         if s == LOCATED and since <= FLICKER_FRAMES and vnorm(across) <= SOURCE_JUMP_M_S * dt:
             # markers back after a flicker: their step across it is measured, and the output goes on at that, not at
-            # its own step along the course (the Vicon take's left wrist, lost for a frame at 172 where a 41 mm a
-            # frame swing stopped short at 24, went on at 41 and came back 63 mm off its markers; 32 so)
+            # its own step along the course (which, through a fast swing, comes back well off the markers)
             offset[k] = last_out[k] + across - raw
         offset_vel[k] = 0.0  # a new offset, eased from rest
         if jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and vnorm(offset[k]) > 0:

@@ -12,11 +12,7 @@ memory does, and never from filled joints.
 
 Its point turns the swivel's estimate along the circle, by at most half the angle between them and
 less the further this frame's body lies from those it learned from (its leverage, z^T (Z^T Z + lam I)^-1 z):
-a linear model is trusted where it interpolates. On the dance set's eight arms, elbow hidden from
-1 s to the end (prototype, joint level), the swivel and limb memory were 164.9 mm summed over the
-eight means; with this point at half weight 150.6, but walk1's right arm went 16.6 -> 21.3 mm, max
-50 -> 101, on poses unlike any learned; weighted by leverage, 150.5 and walk1 right 17.4 / 50. The
-model alone was 156; a nearest-neighbour search on the same features 191.
+a linear model is trusted where it interpolates, and poses unlike any learned are left to the swivel.
 """
 from __future__ import annotations
 
@@ -33,10 +29,8 @@ BODY_MODEL_HELP = ("beyond the thesis: a lone lost elbow or knee turned on its s
                    "regression from the rest of the located body, learned online from this limb and the other "
                    "(mirrored), puts it (with swivel)")
 # The end model takes a lost limb over only once the gap has lasted this long: before, the limb held as it was,
-# with the blend's course on the markers' last motion, does better (91 % of the Vicon take's real gaps last 0.1 s
-# or less). Every limb of eight takes hidden 1 s in every 2 s, the ends' means: at once 111 mm, after 0.15 / 0.2 /
-# 0.3 / 0.4 s 99 / 102 / 110 / 118 mm (the middle joints 70 -> 61-68); hidden 0.1 s in every 0.5 s, 20 mm at once
-# and the returns over 1.5x their normal step 3 -> 4, after 0.2 s as without the model (21 mm).
+# with the blend's course on the markers' last motion, does better (most real gaps last a tenth of a second or
+# less), and a model taken at once makes more of the returns jump.
 END_WAIT_S = 0.2
 END_MODEL_HELP = ("beyond the thesis: a limb lost from its first joint down (elbow, wrist and hand; knee, ankle and "
                   f"foot) has its end put, once the gap has lasted {END_WAIT_S:g} s, where a regression from the rest "
@@ -44,24 +38,20 @@ END_MODEL_HELP = ("beyond the thesis: a limb lost from its first joint down (elb
                   "joints between aim at it; the thesis held the lost limb as it was relative to its parent")
 MODELLED = frozenset({"elbow_l", "elbow_r", "knee_l", "knee_r"})
 MODELLED_ENDS = frozenset({"wrist_l", "wrist_r", "ankle_l", "ankle_r"})  # the end model's
-RIDGE = 10.0          # on standardized features (prototype: 1, 10 and 30 within 1.5 mm on dance2, 300 worse)
+RIDGE = 10.0          # on standardized features: the fit is flat over an order of magnitude either side
 MIN_SAMPLES = 60      # poses before the model is trusted (one second at 60 Hz)
-REFIT_SAMPLES = 60    # new poses before the model is refitted, when it is needed (prototype: every 30 frames)
+REFIT_SAMPLES = 60    # new poses before the model is refitted, when it is needed
 MAX_WEIGHT = 0.5      # of the turn towards the model's point, at zero leverage
-LEVERAGE_SCALE = 2.0  # the weight is MAX_WEIGHT / (1 + leverage / LEVERAGE_SCALE) (prototype: 0.5-4 within 2 mm)
-# The end model's point is taken the same way, from where the end was held, with 1 in place of MAX_WEIGHT: over
-# every limb of eight takes hidden 1 s in every 2 s, the ends' means 109 -> 111 mm against the point taken whole,
-# the returns over 1.5x their normal step 5 -> 3 (the worst 4.5x -> 2.1x); a scale of 1 and 4: 114 and 110 mm.
+LEVERAGE_SCALE = 2.0  # the weight is MAX_WEIGHT / (1 + leverage / LEVERAGE_SCALE)
+# The end model's point is taken the same way, from where the end was held, with 1 in place of MAX_WEIGHT: taken
+# whole at once, its returns jump more.
 END_MAX_WEIGHT = 1.0
-# The model's point moves at most this fast in the limb parent's frame. On a fast move its leverage rises
-# and the linear model swings: dance2's left elbow, hidden 0.1 s in every 0.5 s, had its point 150 mm off
-# for two frames at 19 s, and the fill moved 1.60x its normal step at that loss. At 3 m/s: 0.75x, and
-# no mean or max on the dance set moved by more than 0.1 mm.
+# The model's point moves at most this fast in the limb parent's frame: on a fast move its leverage rises and
+# the linear model swings for a frame or two; a joint itself moves slower than this.
 MAX_SPEED_M_S = 3.0
 SD_FLOOR = 1e-3        # of a feature (metres, or a unit vector's component): constant ones stay harmless
 # Joints left out of the features: they repeat their neighbours (an end site is its parent's frame, the
-# clavicle joint the sternum point). Without them 60 features, not 81: the dance set's eight elbows
-# summed to 150.5 mm either way (prototype), and a refit costs 0.4x.
+# clavicle joint the sternum point). Without them 60 features, not 81: the same answers, and a refit costs 0.4x.
 REPEATED = frozenset(INDEX[j] for j in END_SITES | {"clavicle_l", "clavicle_r"})
 SWAPPED = np.array([INDEX[j[:-1] + {"l": "r", "r": "l"}[j[-1]]] if j[-2:] in ("_l", "_r") else INDEX[j]
                     for j in JOINTS], np.int64)

@@ -132,8 +132,7 @@ class LimbFiller:
         self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
         # Bone lengths learned online: each bone's mean length over the frames that located both
         # its joints (sum, count). Off, the swivel takes the lengths of the last whole frame: its marker
-        # noise, and the stretch of a limb that straightened past its reach, then last the whole gap
-        # (dance set walk2, left elbow hidden from 1 s: 23 -> 20 mm).
+        # noise, and the stretch of a limb that straightened past its reach, then last the whole gap.
         self.learned_lengths = learned_lengths
         self.lengths = np.zeros((n, 2))  # learned always: the IK chains keep them (the thesis's rigid bones)
         self.no_lengths = np.zeros((n, 2))
@@ -144,8 +143,7 @@ class LimbFiller:
         self.memory = LimbMemory(n, other_idx) if limb_memory else None
         self.no_recall = np.full((n, 3), np.nan)
         # The body model: a lone lost elbow or knee turned on its circle towards where a regression
-        # from the rest of the located body puts it (mocap_core.body_model). Dance set, eight arms, elbow hidden
-        # from 1 s: dance2's 36 / 35 mm -> 29 / 31 (prototype).
+        # from the rest of the located body puts it (mocap_core.body_model).
         middle = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED]
         self.body_model = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) \
             if body_model and other_idx is not None and middle else None
@@ -221,7 +219,7 @@ class LimbFiller:
         if status[idx[k]] != MISSING:  # seen, or put by the hip stage's fills (the leg hinge, say)
             self.end_seen = status[idx[k]] == af.LOCATED
         # a limb whose better fill drops out for a few frames is held as that fill left it, not handed to the
-        # model and back (the Vicon take's kicking leg, its hinge gone for 4 frames: 25 frames 100-150 mm worse)
+        # model and back (each hand-over is a jump of its own)
         if not self.has_prev[0] or not (self.end_seen or all_finite(self.end_local)):
             return 0
         point, weight = model.predict(positions, frames, status, self.blend.frame_s)

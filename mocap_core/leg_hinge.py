@@ -48,17 +48,13 @@ SEARCH_STEP = np.radians(1.0)     # first in these steps, then in tenths of them
 BEND_PRICE_M = 0.001              # per radian away from the last bend: settles near-ties between two bends
 # A shank marker lost goes on at its last step for this many frames, and the leg with it (the "velocity
 # over short gaps"); after that the ankle, where it is seen or rebuilt, takes its place, and
-# else the leg is left to the IK stage. In the Vicon take's kick the wand is lost for
-# a few frames at 8.40 s: right knee / ankle hidden from 1 s, 67 / 54 mm (max 465 / 656) with the leg held
-# there; 3 / 6 / 9 / 12 / 24 frames: 61 / 43, 59 / 38, 59 / 35, 63 / 37, 77 / 37 mm (max 363 / 440, 296 / 296,
-# 311 / 296, 366 / 296, 549 / 296). (Frames, not seconds: 6 at that take's 120 Hz are 50 ms.)
+# else the leg is left to the IK stage. Held still instead, a kicking leg falls far behind; carried on for long,
+# it overshoots.
 COURSE_FRAMES = 6
 # The knee's roll about the shank marker-ankle line is searched this far either side of the rebuild's, in
 # ROLL_STEP steps, then in tenths and hundredths of them (0.05 deg: 0.05 mm at the epicondyles). ROLL_PRICE
 # (square metres per square radian) holds it near the rebuild's where the distances hardly fix it: their own
-# noise is 6-14 mm. Vicon take, knee and ankle hidden from 1 s, right / left knee and ankle: 59 / 38, 48 / 24 mm
-# without the roll; priced at 0, 57 / 38, 38 / 21 (right knee max 369 against 296); at 0.0001, 55 / 41,
-# 37 / 20; at 0.001, 53 / 40, 36 / 20; at 0.01, 57 / 37, 38 / 21.
+# noise is a centimetre or so, and unpriced the roll follows it.
 MAX_ROLL = np.radians(60.0)
 ROLL_STEP = np.radians(5.0)
 ROLL_PRICE = 0.001

@@ -2,8 +2,7 @@
 
 The swivel (mocap_core.analytic_fill) puts a lone missing joint on the circle that its two bones
 allow, and turns it to where the bone after it keeps its usual direction in the next joint's frame.
-On a dancer that direction moves with the wrist, and the swivel alone was 31-54 mm off on average
-on the dance set's dance2 and walk2 arms. What the actor did before says more: while a limb is seen
+On a dancer that direction moves with the wrist. What the actor did before says more: while a limb is seen
 whole, each of its middle joints is remembered relative to the joint before it, in the limb
 parent's frame (the chest for the arms, the pelvis for the legs), together with where the joint
 after it was. Once the middle joint is lost, the poses whose next joint was nearest where it is now
@@ -13,9 +12,7 @@ lengths stay exact.
 
 Each limb also remembers the other limb's poses, mirrored across the body (the parent frame's x
 runs to the subject's left, so a mirror negates it), and keeps learning them while its own joint is
-lost: a dancer does with one arm what the other did. On the dance set, with the elbow hidden from
-1 s, the own poses alone (one second of them) left dance2 and walk2 at 23-57 mm; pooled with the
-other arm's, 14-42 mm, and with the usual direction too 14-36 (prototype, joint level).
+lost: a dancer does with one arm what the other did.
 
 Like the pose memory of the hip stage, it learns only from located joints, never from filled ones.
 """

@@ -7,18 +7,11 @@ the cameras have put a marker wrong (a ghost, a swap, a reflection), and which o
 both are marked lost from where the spacing is off the one learned by more than PAIR_OFF of it until it is back
 within PAIR_BACK_M and held there (not swung through), and the gap fills take over. A marker that slid slowly is
 followed (SPACING_RATE a frame); one stuck back elsewhere is taken at its new spacing once the pair holds it for
-PAIR_STEADY_S. A glitch is not held: walk2's swings through 28-211 mm in 0.65 s.
+PAIR_STEADY_S. A glitch is not held: one swings through far larger and smaller spacings within a fraction of a
+second.
 
-walk2 of the Qualisys dance set: its left wrist markers are 74 mm apart, and 28-211 mm from 4.2 s to 4.85 s. With
-the elbow hidden from 1 s (studio options) the swivel put the elbow from that wrist, 105 mm off at 4.7 s: 18.4 /
-105.5 -> 14.5 / 36.6 mm (mean / max) with the pair dropped from 4.38 s to 4.9 s.
-
-Fast moves change the spacing too, and there the markers are still the better guess: karate's wrist markers (150 mm)
-come 10-30 mm apart in its strikes, the Vicon take's (50 mm) swing through 37-66 mm in a 4-5 m/s swing at 1.4 s.
-Dropped at 25 %, the Vicon's left wrist was filled there and came back 73 mm off its markers; at 10 mm (5 mm back)
-karate's left elbow, rebuilt from those markers, went 18.0 / 59.0 -> 19.9 / 153 mm (hidden 1-20 s); at 6 times the
-spacing's own SD (10 mm at least) 18.3 / 67.6. At 40 % only glitches are dropped: three of the dance set's eight
-wrists (2-31 frames, to 126-211 mm) and karate's right at 32.3 s (to 408 mm); nothing on the Vicon take.
+Fast moves change the spacing too, and there the markers are still the better guess than any fill: so only a
+change by PAIR_OFF (40 %) of the spacing drops the pair, which strikes and swings do not reach and glitches do.
 """
 from __future__ import annotations
 

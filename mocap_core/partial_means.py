@@ -35,10 +35,9 @@ NEIGHBOURS = 4
 class PartialMeans:
     """Fills, frame by frame, the landmarks still lost that are the mean of several markers of which some are
     seen. It runs after the other landmark fills (the hips', then last in LandmarkFills), and fills only what
-    they could not: the segment rebuild's rigid foot put a kicking toe better than its one metatarsal marker
-    left (the Vicon take's right knee and ankle hidden from 1 s: 28 / 21 mm with the rebuild first, 33 / 24 with
-    the partial means first). Keep one per actor and marker set: it keeps, per such landmark, the last frame in
-    which all its markers were seen."""
+    they could not: the segment rebuild's rigid foot puts a kicking toe better than its one metatarsal marker
+    left. Keep one per actor and marker set: it keeps, per such landmark, the last frame in which all its markers
+    were seen."""
 
     def __init__(self, landmark_map: LandmarkMap):
         self.map = landmark_map

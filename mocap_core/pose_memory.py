@@ -69,14 +69,12 @@ NEIGHBOURS = 20     # remembered poses fitted (dance1: 10 gave the same error, 2
 # the velocity's search then looks in the same memory (its own, larger distances fell back far too often).
 FALLBACK_M = 0.1
 # Per frame, how far the estimate moves towards the recalled answer, whose poses change as the toe moves: a
-# smaller share lags behind a walking knee, a larger one lets the recall's jumps through at a marker's return
-# (0.7: 1.63x the normal step on short gaps, against 1.44x here).
+# smaller share lags behind a walking knee, a larger one lets the recall's jumps through at a marker's return.
 SMOOTHING = 0.5
-# The pelvis frame comes from three skin markers, whose shake turns it by 1.3-2.7 deg a frame (95th
-# percentile on the dance set; a degree is 8 mm at the knee) and whose slips move its origin (dance2's right
-# ASIS, 127 mm in a frame). An alpha-beta tracker of its axes and origin (Benedict-Bordner: the turn's and the
-# step's gain is PELVIS_GAIN^2 / (2 - PELVIS_GAIN)) follows a steady motion without lag and takes PELVIS_GAIN
-# of a one-frame slip: half the shake, within 0.3 deg of the raw axes (median).
+# The pelvis frame comes from three skin markers, whose shake turns it by a degree or two a frame (a degree is
+# about 8 mm at the knee) and whose slips move its origin. An alpha-beta tracker of its axes and origin
+# (Benedict-Bordner: the turn's and the step's gain is PELVIS_GAIN^2 / (2 - PELVIS_GAIN)) follows a steady
+# motion without lag and takes only PELVIS_GAIN of a one-frame slip.
 PELVIS_GAIN = 0.6
 PELVIS_TURN_GAIN = PELVIS_GAIN ** 2 / (2.0 - PELVIS_GAIN)
 PELVIS_RESET_RAD = 0.35  # 20 deg away from where the tracker expected it

@@ -46,21 +46,16 @@ MIN_PARTNERS = 3
 # Two partners leave the rotation about their line free. When one is a tracking marker on the bone's
 # shaft (a wand, a forearm or shank marker) and the other a landmark at its end, their line runs along
 # the bone, and a lost landmark is carried by the least rotation that turns that line (its roll about
-# the bone kept from the reference). CMU karate, knee alone hidden 1-20 s (knee and ankle markers and
-# one shank marker): 66 / 409 -> 25 / 89 mm; Vicon free-form, right elbow (with real gaps): 31 -> 14.
-# Two landmarks (the wrist's styloids, say) run across the bone: left to the IK stage's swivel, unless the bone
+# the bone kept from the reference). A knee with only the ankle and one shank marker left is then carried
+# with its shank instead of left to IK. Two landmarks (the wrist's styloids, say) run across the bone: left to the IK stage's swivel, unless the bone
 # above fixes the roll (ROLL_PRICE, below).
 MIN_SHAFT_PARTNERS = 2
 # Partners nearly on one line leave the rotation about it free (a toe marker between two metatarsal
 # markers, say): they must spread at least this far (RMS) from their best line. (An elbow marker
 # with two wrist markers 6 cm apart spreads 7-9 mm: enough.)
 MIN_SPREAD_M = 0.005
-# In the rigid fit each partner weighs by its nearness to the member in the reference (kernels.nearness_weight).
-# Elbow hidden from 1 s (studio options, mean / max mm), unweighted -> weighted: CMU karate left 19.5 / 66.9 ->
-# 18.6 / 63.2, right 22.9 / 83.4 -> 22.0 / 78.6; the Vicon take's 115.9 -> 115.2 and 11.7 -> 11.3; the sprint's
-# 11.2 / 30.7 and the Qualisys walk's 3.3 / 6.4 -> 3.4 / 6.5 as good as the same. The walk's knee 11.0 / 23.5 ->
-# 9.7 / 26.3. The inverse cube or fourth power gains under 1 mm more (karate left's max 62.4 / 62.0) and takes the
-# walk's knee max to 27-28.
+# In the rigid fit each partner weighs by its nearness to the member in the reference (kernels.nearness_weight):
+# skin slides less near the point than far along the bone, so near partners say more of where it went.
 REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel or toe marker rebuilt from the rigid "
                 "motion of at least 3 markers of its forearm, shank or foot still seen (with the profile's tracking "
                 "markers; of the styloids or malleoli, one that slid on the skin left out; a forearm's roll also "
@@ -74,11 +69,10 @@ REBUILD_HELP = ("beyond the thesis: a lost elbow, olecranon, knee, ankle, heel o
                 " some are seen (a lost one keeps its offset, turned as the markers nearest it turn)")
 # Rigid bodies of landmarks: (bone, rebuilt when lost, partners only), in the order they are rebuilt:
 # the shank's partners include the malleoli the foot may have rebuilt just before. The profile's
-# tracking markers of a bone (wands, clusters) join it as partners. The styloids help the forearm: both
-# rebuilt from the elbow's markers, a lost wrist came out 27 mm off on the sprint where the IK stage's swivel
-# gives 13 mm (the radius turns about the ulna); one is rebuilt only while the other is seen (below). The
-# malleoli are never rebuilt from the shank: a lost ankle came out 45 mm off on the sprint that way, where the
-# foot gives 2 mm.
+# tracking markers of a bone (wands, clusters) join it as partners. The styloids help the forearm, but are not
+# rebuilt from the elbow's markers: the radius turns about the ulna, which those do not see, and the IK stage's
+# swivel does better; one is rebuilt only while the other is seen (below). The malleoli are never rebuilt from the
+# shank, whose markers do not see the ankle's flexion; the foot's do.
 # A name is a landmark of the segment's side ("HLE": L_HLE on the left), of the other side ("other SAE"), or one
 # of the trunk's ("TV2").
 SEGMENTS = (
@@ -88,30 +82,22 @@ SEGMENTS = (
     ("thorax", ("SAE",), ("other SAE", "TV2", "TV12", "SME")),  # the acromion with the trunk (below)
     ("styloids", ("RSP", "USP"), ("HLE", "HME", "UOA")),  # one styloid, while the other is seen (below)
 )
-# One styloid lost and the other seen: the wrist joint, the styloids' mean, was lost with it, and the IK stage put
-# it 19-45 mm off on average (one styloid hidden from 1 s: the sprint, the Vicon take, karate). Rebuilt from the
-# other styloid and the forearm's other markers (its tracking markers too: FAR_END_OF names the bone whose they
-# are), the sprint's wrist is 4-5 mm off, the Vicon take's right 5-9, the Qualisys walk's 1.5-3.5. Only with at
-# least LONE_PARTNERS["styloids"] of those others seen besides the other styloid: karate's wrist bar has one elbow
-# marker and one forearm marker, and the bar turns with pronation about the forearm's line, which they do not
-# see (its radial-side marker rebuilt from them came out 46 / 171 mm off, against 34 / 70 for the IK stage). Both
-# lost, the wrist is left to the IK stage (above).
+# One styloid lost and the other seen: the wrist joint, the styloids' mean, is lost with it, and IK can only guess
+# it; the forearm's other markers and the other styloid put it far nearer (its tracking markers too: FAR_END_OF
+# names the bone whose they are). Only with at least LONE_PARTNERS["styloids"] of those others seen besides the
+# other styloid: a wrist bar turns with pronation about the forearm's line, which one elbow and one forearm marker
+# do not see. Both lost, the wrist is left to the IK stage (above).
 FAR_END_OF = {"styloids": "forearm"}
 LONE_PARTNERS = {"styloids": 3}  # a pair each rebuilt only while the other is seen: how many more partners it needs
-# The acromion rides the shoulder blade, which slides on the ribs, but far less than a lost one's stand-ins
-# moved: the chest then fell back to other markers (it turned up to 50 degrees in a frame on the Vicon take) and
-# the shoulder joint to the arm's IK. Shoulder hidden from 1 s (studio options): dance1 109 / 262 mm, the Vicon
-# take 77 / 302; the acromion carried with the trunk from 1 s on (the other acromion, both spine markers and the
-# sternum, rigidly) is 4-41 mm off on average over the eight takes (the Vicon take's, with three of them, 38-41).
+# The acromion rides the shoulder blade, which slides on the ribs, but far less than a lost one's stand-ins move:
+# the chest would fall back to other markers (and jump) and the shoulder joint to the arm's IK. So a lost acromion
+# is carried rigidly with the trunk (the other acromion, both spine markers and the sternum).
 # A joint's landmarks belong to the bone above as well: once their own bone's motion has put them, they
 # are moved to keep their learned distances to that bone's tracking markers (bone lengths are constant,
-# and skin slides: a fit's rotation errors grow away from its markers). Sprint elbow joint: 22 / 74 mm from
-# the forearm alone, 12 / 40 mm with the upper arm's two markers. Per bone: the members refined, the bone
+# and skin slides: a fit's rotation errors grow away from its markers). Per bone: the members refined, the bone
 # above, and whether the bone's own tracking markers hold their distances firmly too (second pass, below).
-# The malleoli keep theirs to the shank's markers, not to the foot's: on the Vicon take the lateral one
-# keeps its distance from the shank's wand within 2 mm SD, from the metatarsals only within 10-13 mm SD
-# (ranges of 40-60 mm) as the foot flexes. The knee's epicondyles keep theirs to a thigh marker (the Vicon
-# set's LHIP / RHIP, 3-7 mm SD), not to the shank's wand.
+# The malleoli keep theirs to the shank's markers, not to the foot's, whose distances change as the foot
+# flexes; the knee's epicondyles keep theirs to a thigh marker, not to the shank's.
 ALSO_ON = {"forearm": (("HLE", "HME"), "upper_arm", True),
            "foot": (("FAL", "TAM"), "shank", False),
            "shank": (("FLE", "FME"), "thigh", False)}
@@ -119,13 +105,9 @@ assert set(ALSO_ON) | {above for _, above, _ in ALSO_ON.values()} <= set(TRACKIN
 DISTANCE_RATE = 1 / 100  # how fast a learned distance follows the frames where both points are measured
 DISTANCE_PRIOR = 0.1     # weight of the rigid estimate against the distances (per squared metre)
 # Then a second pass keeps the distances to the tracking markers alone, firmly (the estimate's weight
-# TRACKING_PRIOR): wands and clusters ride the bone's flesh, the styloids a turning radius and sliding
-# skin. Over the karate take the lateral epicondyle stays 3.6 mm (SD) from the upper arm's marker and
-# 4.1 mm from the forearm's, 12-19 mm from the styloids. The first pass leaves the point where all of
-# them agree best; the second moves it towards the distances that hold. Elbow joint, hidden from 1 s:
-# sprint 12.3 / 39.8 -> 11.4 / 30.7 mm (mean / max), karate left 21.0 / 69.7 -> 19.6 / 66.9, right
-# 23.0 / 86.4 -> 22.9 / 83.4; the Qualisys walk 2.9 -> 3.6. (0.01, the distances held exactly, put the
-# karate landmark nearer, 18 mm, but its joint no nearer and 85 mm off at worst.)
+# TRACKING_PRIOR): wands and clusters ride the bone's flesh and keep their distances to an epicondyle within a
+# few millimetres, where the styloids, on a turning radius under sliding skin, do not. The first pass leaves the
+# point where all of them agree best; the second moves it towards the distances that hold.
 TRACKING_PRIOR = 0.3
 # Partners on one line, or two across the bone, leave the rotation about their line free: the roll. Where the bone
 # above is seen, a refined member is carried by the least turn of that line and then rolled about it to the angle
@@ -170,20 +152,13 @@ ROLL_FIRM_FULL = 0.08
 # their spacing has changed by over SLID_M since the member's reference, one of them has slid on the skin (or was
 # put off by the cameras), and the one whose distances to the segment's other seen partners changed more is left
 # out of the fit. While that cannot be told (the other partners lost, or the pair not both seen) the last verdict
-# stands. The Vicon take's inner wrist marker slides 30-50 mm up the forearm after 1.5 s, the pair's spacing
-# changing by only 7-9 mm; left elbow hidden from 1 s, its epicondyles' landmarks were 55 / 175 mm off on
-# average, 30 / 28 with it left out.
+# stands. (A wrist marker can slide centimetres up the forearm while the pair's spacing changes by millimetres.)
 BONY_PAIRS = {"forearm": ("RSP", "USP"), "shank": ("FAL", "TAM")}
 SLID_M = 0.005
-# A marker can also slide with the pair's spacing kept: the Vicon take's inner wrist marker is 30 mm nearer the
-# forearm's marker at 8.7 s than at 1 s, its spacing to the outer one, 7-9 mm short from 1.5 s on, back within 4 mm
-# there. So while one of the pair has its distances to the segment's other seen partners changed by over
-# SLID_ALONG_M, and by over SLID_ALONG_RATIO times the other's, it is found slid once that has held for
-# SLID_ALONG_S, spacing or not. A strike swings a forearm's skin against its wrist bar for less than that: karate's
-# outer wrist marker runs 24-36 mm off its reference distance to the forearm's marker for 0.2 s at 8.3 s, the inner
-# one by 4-23, with the bar's spacing kept. Left elbow hidden from 1 s (studio options), the Vicon take 27.3 / 135.7
-# -> 24.0 / 103.2 mm, karate's, the Vicon's right, the sprint's and the walk's unchanged; found slid at once (no
-# hold) karate's left elbow went 18.0 / 59.0 -> 17.9 / 77.9; at 30 mm the Vicon's gain was lost (26.9 / 130.7).
+# A marker can also slide with the pair's spacing kept. So while one of the pair has its distances to the segment's
+# other seen partners changed by over SLID_ALONG_M, and by over SLID_ALONG_RATIO times the other's, it is found slid
+# once that has held for SLID_ALONG_S, spacing or not. A strike swings a forearm's skin against its wrist bar for
+# less than that, and those markers are not left out.
 SLID_ALONG_M = 0.02
 SLID_ALONG_RATIO = 3.0
 SLID_ALONG_S = 0.25

@@ -22,8 +22,7 @@ from mocap_core.profiles import Profile
 from mocap_core.segment_rebuild import SEGMENTS, segment_landmark, tracking_segment
 
 TOLERANCE = 0.25  # a pair is off where its distance is off the usual one by more than this part of it,
-FLOOR_M = 0.015   # and by this much at least (skin moves 5-10 mm on a 50 mm toe pair; the Vicon take's inner
-#                   wrist marker is 16 mm off its 45 mm spacing to the outer one for 0.6 s)
+FLOOR_M = 0.015   # and by this much at least (skin moves a few millimetres on a short pair of markers)
 MERGE_S = 0.1     # stretches off closer than this are one
 PELVIS = ("pelvis", ("SACR", "L_IAS", "R_IAS"), "")
 
