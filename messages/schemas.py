@@ -20,6 +20,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap_core.skeleton import N_JOINTS
+from mocap_core.world import UP_AXES
 from messages.arrays import Array
 
 
@@ -33,7 +34,7 @@ class Header(BaseModel):
     frame: int = 0
     capture_time_s: float = 0.0
     entry_time_ns: int = 0
-    up_axis: Literal["", "+x", "-x", "+y", "-y", "+z", "-z"] = ""   # the source's world (mocap_core.world); "" = not said
+    up_axis: Literal[("", *UP_AXES)] = ""   # the source's world (mocap_core.world); "" = not said
 
 
 class Message(BaseModel):

@@ -231,17 +231,16 @@ class Launcher:
         })
 
     def start(self) -> None:
-        from mocap_core.warmup import ensure_compiled, kernels_cached
+        from mocap_core.warmup import ensure_compiled
 
-        if not kernels_cached():  # else every node process would compile the same kernels at once
-            try:
-                ensure_compiled(log)
-            except subprocess.CalledProcessError as e:
-                if self.stop_requested:  # Ctrl-C during the compile
-                    return
-                raise LaunchError(f"compiling the numba kernels failed (exit {e.returncode}); "
-                                  "`python -m mocap_core.warmup` shows why") from None
-            self.t0 = time.monotonic()  # readiness and --duration count from the graph's start
+        try:  # up front: else every node process would compile the same kernels at once
+            if ensure_compiled(log):
+                self.t0 = time.monotonic()  # readiness and --duration count from the graph's start
+        except subprocess.CalledProcessError as e:
+            if self.stop_requested:  # Ctrl-C during the compile
+                return
+            raise LaunchError(f"compiling the numba kernels failed (exit {e.returncode}); "
+                              "`python -m mocap_core.warmup` shows why") from None
         for p in self.processes:
             self._spawn(p)
         self._spawn_standby()

@@ -67,7 +67,10 @@ def unlocatable(present: frozenset[str]) -> dict[str, list[tuple[str, ...]]]:
     if not missing:
         return {}
     fixes: dict[str, list[tuple[str, ...]]] = {JOINTS[j]: [] for j in missing}
-    available = [name for name in LANDMARKS if name not in present and not np.isnan(_t_pose(name)).any()]
+    from mocap_core.rig import t_pose_landmarks
+
+    modelled = np.isfinite(t_pose_landmarks()).all(axis=1)  # the synthetic subject lacks a few (UOA, PAS)
+    available = [name for name in LANDMARKS if name not in present and modelled[LANDMARK_INDEX[name]]]
     for name in available:
         with_it = _located(present | {name})
         for j in missing:
@@ -82,12 +85,6 @@ def unlocatable(present: frozenset[str]) -> dict[str, list[tuple[str, ...]]]:
                     if with_them[j]:
                         fixes[JOINTS[j]].append((a, b))
     return fixes
-
-
-def _t_pose(name: str) -> np.ndarray:
-    from mocap_core.rig import t_pose_landmarks
-
-    return t_pose_landmarks()[LANDMARK_INDEX[name]]
 
 
 def describe_missing(fixes: dict[str, list[tuple[str, ...]]], shown: int = 3) -> list[str]:

@@ -37,13 +37,14 @@ def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False) -> None:
         _write_stamp()
 
 
-def ensure_compiled(log) -> None:
+def ensure_compiled(log) -> bool:
     """Before a command's first frame: compile the kernels up front, in parallel and saying so, when this
-    checkout has not yet (else the first frames would sit compiling, one process, in silence)."""
+    checkout has not yet (else the first frames would sit compiling, one process, in silence). True if it did."""
     if kernels_cached():
-        return
+        return False
     log.info("compiling the numba kernels for this checkout, once (about 2 minutes on 2 cores)...")
     log.info("numba kernels compiled and cached in %.0f s", compile_kernels())
+    return True
 
 
 def _warm(part: str) -> None:

@@ -10,12 +10,12 @@ and one Z flip from Unity's left-handed Y up).
 """
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
 UpAxis = Literal["+x", "-x", "+y", "-y", "+z", "-z"]
-UP_AXES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
+UP_AXES: tuple[str, ...] = get_args(UpAxis)
 DEFAULT_UP: str = "+z"  # QTM's default
 
 
@@ -40,9 +40,3 @@ def to_canonical(up_axis: str) -> np.ndarray:
     new_z = np.cross(new_x, new_y)
     return np.array([new_x, new_y, new_z])  # rows: the canonical axes in source coordinates
 
-
-def height(positions: np.ndarray, up_axis: str) -> np.ndarray:
-    """The coordinate along the up axis (..., 3) -> (...)."""
-    up = normalize_up(up_axis)
-    h = np.asarray(positions)[..., "xyz".index(up[1])]
-    return h if up[0] == "+" else -h

@@ -7,13 +7,11 @@ from __future__ import annotations
 import time
 
 import foxglove
-from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import MarkerFrame, SkeletonFrame
-from nodes.foxglove_scene import joint_transforms, marker_scene, skeleton_scene
+from nodes.foxglove_scene import Channels
 from nodes.runtime import Node
-from nodes.skeleton_codec import from_message
 
 
 class Params(BaseModel):
@@ -32,9 +30,7 @@ class FoxgloveOutput(Node):
         self.context = foxglove.Context()
         self.server = foxglove.start_server(name="mocap", host=self.params.host, port=self.params.port,
                                             context=self.context)
-        self.skeleton = SceneUpdateChannel("/skeleton", context=self.context)
-        self.markers = SceneUpdateChannel("/markers", context=self.context)
-        self.tf = FrameTransformsChannel("/tf", context=self.context)
+        self.channels = Channels(self.context)
         self.next = {"skeleton/solved": 0.0, "markers/raw": 0.0}
         self.log.info("Foxglove WebSocket at ws://%s:%d", self.params.host, self.server.port)
 
@@ -43,14 +39,7 @@ class FoxgloveOutput(Node):
         if now < self.next[topic]:
             return
         self.next[topic] = now + 1.0 / self.params.max_rate_hz
-        t = msg.header.entry_time_ns or time.time_ns()
-        up = msg.header.up_axis
-        if isinstance(msg, SkeletonFrame):
-            positions, frames, status = from_message(msg)
-            self.skeleton.log(skeleton_scene(positions, status, up, t), log_time=t)
-            self.tf.log(joint_transforms(positions, frames, up, t), log_time=t)
-        else:
-            self.markers.log(marker_scene(msg.positions.astype(float), up, t), log_time=t)
+        self.channels.log(msg, msg.header.entry_time_ns or time.time_ns())
 
     def teardown(self) -> None:
         self.server.stop()

@@ -87,35 +87,48 @@ def joint_transforms(positions: np.ndarray, frames: np.ndarray, up_axis: str, t_
         for j in np.flatnonzero(ok)])
 
 
+class Channels:
+    """The three topics in one foxglove-sdk context (a live server's, or an MCAP writer's)."""
+
+    def __init__(self, context):
+        from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
+
+        self.skeleton = SceneUpdateChannel("/skeleton", context=context)
+        self.markers = SceneUpdateChannel("/markers", context=context)
+        self.tf = FrameTransformsChannel("/tf", context=context)
+
+    def log(self, msg, t_ns: int) -> int:
+        """A SkeletonFrame (to /skeleton and /tf) or a MarkerFrame (to /markers), stamped ``t_ns``; how many
+        messages went out."""
+        from messages import SkeletonFrame
+        from nodes.skeleton_codec import from_message
+
+        up = msg.header.up_axis
+        if isinstance(msg, SkeletonFrame):
+            positions, frames, status = from_message(msg)
+            self.skeleton.log(skeleton_scene(positions, status, up, t_ns), log_time=t_ns)
+            self.tf.log(joint_transforms(positions, frames, up, t_ns), log_time=t_ns)
+            return 2
+        self.markers.log(marker_scene(msg.positions.astype(float), up, t_ns), log_time=t_ns)
+        return 1
+
+
 def export_foxglove(src, dst) -> int:
     """A bag's skeleton/solved and markers/raw in these schemas, to a new MCAP for the Foxglove app. Log and
     publish times are each frame's graph-entry time (wall clock), so the timeline reads as the session did."""
     import foxglove
-    from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 
     from messages import decode
     from nodes.bags import read_bag
-    from nodes.skeleton_codec import from_message
 
     context = foxglove.Context()
     writer = foxglove.open_mcap(dst, allow_overwrite=True, context=context)
-    skeleton = SceneUpdateChannel("/skeleton", context=context)
-    markers = SceneUpdateChannel("/markers", context=context)
-    tf = FrameTransformsChannel("/tf", context=context)
+    channels = Channels(context)
     n = 0
     try:
         for m in read_bag(src, ["skeleton/solved", "markers/raw"]):
             msg = decode(m.data, m.topic)
-            t = msg.header.entry_time_ns or m.log_time_ns
-            up = msg.header.up_axis
-            if m.topic == "skeleton/solved":
-                positions, frames, status = from_message(msg)
-                skeleton.log(skeleton_scene(positions, status, up, t), log_time=t)
-                tf.log(joint_transforms(positions, frames, up, t), log_time=t)
-                n += 2
-            else:
-                markers.log(marker_scene(msg.positions.astype(float), up, t), log_time=t)
-                n += 1
+            n += channels.log(msg, msg.header.entry_time_ns or m.log_time_ns)
     finally:
         writer.close()
     return n

@@ -5,7 +5,6 @@ import builtins
 import sys
 
 import bpy
-from mathutils import Vector
 
 path = sys.argv[sys.argv.index("--") + 1]
 _open = builtins.open

@@ -7,7 +7,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from mocap_core.fit.calibration import CalibrationSettings, ROTATING, calibrate, joint_offsets, marker_offsets
+from mocap_core.fit.calibration import CalibrationSettings, ROTATING, joint_offsets, marker_offsets
 from mocap_core.fit.compare import bone_lengths, cases
 from mocap_core.fit.fitter import FitSettings, SkeletonFitter
 from mocap_core.fit.kernel import forward

@@ -5,18 +5,15 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
-from collections import defaultdict
 
 import numpy as np
 import pytest
 
 from messages import decode
-from mocap_core.ik.kernels import quats_to_frames
 from mocap_core.bvh import NAMINGS
 from mocap_core.joints_csv import read_joints_csv
-from mocap_core.rig import BONE_JOINT, BONE_PARENT, BONES, to_unity_position
+from mocap_core.rig import BONE_JOINT, BONES, to_unity_position
 from mocap_core.world import to_canonical
 from mocap_core.skeleton import JOINTS, Status
 from nodes.bags import read_bag

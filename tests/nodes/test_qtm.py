@@ -1,12 +1,8 @@
 """The official qtm-rt client against our QTM emulator over real TCP, and the ingest node's recovery."""
 import asyncio
 import csv
-import os
-import signal
 import socket
 import struct
-import subprocess
-import sys
 import threading
 import time
 import xml.etree.ElementTree as ET
@@ -15,7 +11,7 @@ import numpy as np
 import qtm_rt
 
 from mocap_core.recordings import read_recording
-from tests.conftest import REPO, data_file, emulator, free_port, launched, log_rows, wait_for
+from tests.conftest import data_file, emulator, free_port, launched, log_rows, wait_for
 
 TAKE = "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"  # real gaps: NaN must come through
 
