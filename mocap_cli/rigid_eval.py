@@ -64,23 +64,26 @@ def run(args) -> int:
     return 0
 
 
-def summary(rows: list[dict]) -> str:
-    """One line per take and method: the worst case, the elbows and the knees with ankles (mean / max mm over both
-    sides, against the method's own complete solve), and the limb bones' length CV with every marker seen."""
-    def cell(take, method, prefix):
-        got = [r for r in rows if r["take"] == take and r["method"] == method and r["case"].startswith(prefix)]
-        if not got:
-            return ""
-        return f"{sum(r['mean_mm'] for r in got) / len(got):.0f} / {max(r['max_mm'] for r in got):.0f}"
+SUMMARY_METHODS = ("thesis", "studio", "fit", "fit_subject")
 
-    lines = ["| take | method | worst case | elbow hidden | knee + ankle hidden | bone CV % |",
-             "|---|---|---|---|---|---|"]
+
+def summary(rows: list[dict]) -> str:
+    """One line per take: the worst case, the elbows and the knees with ankles, each as the mean mm over both sides
+    (against the method's own complete solve) of the thesis's method / the studio options / the fit / the fit of a
+    subject calibrated first; and the limb bones' length CV with every marker seen."""
+    def mean(take, method, prefix):
+        got = [r["mean_mm"] for r in rows if r["take"] == take and r["method"] == method and r["case"].startswith(prefix)]
+        return f"{sum(got) / len(got):.0f}" if got else "-"
+
+    def cv(take, method):
+        return _f(next((r["bone_cv_pct"] for r in rows if r["take"] == take and r["method"] == method
+                        and r["case"] == "all"), float("nan")), 1) or "-"
+
+    lines = [f"Mean mm over both sides; each cell {' / '.join(SUMMARY_METHODS)} (bone CV: the first three).", "",
+             "| take | worst case | elbow hidden | knee + ankle hidden | bone CV % |", "|---|---|---|---|---|"]
     for take in dict.fromkeys(r["take"] for r in rows):
-        for method in ("thesis", "studio", "fit"):
-            cv = next((r["bone_cv_pct"] for r in rows if r["take"] == take and r["method"] == method
-                       and r["case"] == "all"), float("nan"))
-            lines.append(f"| {take} | {method} | {cell(take, method, 'worst')} | {cell(take, method, 'elbow')} | "
-                         f"{cell(take, method, 'knee_ankle')} | {_f(cv, 2)} |")
+        cells = [" / ".join(mean(take, m, case) for m in SUMMARY_METHODS) for case in ("worst", "elbow", "knee_ankle")]
+        lines.append(f"| {take} | {' | '.join(cells)} | {' / '.join(cv(take, m) for m in SUMMARY_METHODS[:3])} |")
     return "\n".join(lines) + "\n"
 
 

@@ -13,11 +13,14 @@ def test_eval_rigid_reports_the_three_methods_on_a_real_take(tmp_path):
     assert r.returncode == 0, r.stderr
     rows = list(csv.DictReader(open(tmp_path / "rigid.csv")))
     by = {(x["case"], x["method"]): x for x in rows}
-    assert {m for _, m in by} >= {"thesis", "studio", "fit"}
+    assert {m for _, m in by} >= {"thesis", "studio", "fit", "fit_subject"}
+    assert ("all", "fit_subject") not in by   # nothing hidden: the subject's fit is the fit
     assert float(by["all", "fit"]["bone_cv_pct"]) < 1e-9 < float(by["all", "thesis"]["bone_cv_pct"])
     assert float(by["all", "fit"]["complete_pct"]) == 100
     for case in ("worst", "elbow_l", "knee_ankle_r"):
         assert float(by[case, "fit"]["estimated_pct"]) == 100
+        assert float(by[case, "fit_subject"]["estimated_pct"]) == 100
+        assert float(by[case, "fit_subject"]["bone_cv_pct"]) < 1e-9
     # the worst case: only the pelvis, head, hand and toe markers from 1 s; the rigid fit is nearer
     assert float(by["worst", "fit"]["mean_mm"]) < float(by["worst", "thesis"]["mean_mm"])
     assert "| qualisys_walk | fit |" in (tmp_path / "rigid.md").read_text()

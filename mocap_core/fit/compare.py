@@ -2,7 +2,10 @@
 
 Each case hides markers (by label, so every method sees the same input) from a time on, solves the take
 three ways and measures the hidden joints against the localization of the complete take; with nothing
-hidden it measures how much the bones' lengths wander. The fit calibrates from the same hidden take.
+hidden it measures how much the bones' lengths wander. The fit calibrates from the same hidden take, as
+``mocap solve --fit`` does; ``fit_subject`` is the studio's order, the subject calibrated first with every
+marker seen (here: from the complete take, standing in for a range-of-motion take) and then fitted to the
+hidden take, as ``mocap calibrate`` then ``mocap solve --subject`` do.
 """
 from __future__ import annotations
 
@@ -11,13 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocap_core.experiments import localize_take, real_gap_moves
+from mocap_core.fit.subject import Subject
 from mocap_core.fit.take import fit_take
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import Profile
 from mocap_core.recordings import Recording
 from mocap_core.skeleton import INDEX, PARENT_INDEX
 
-METHODS = ("thesis", "studio", "fit")
+METHODS = ("thesis", "studio", "fit", "fit_subject")
 # The studio options lean on the profile's ``tracking:`` markers; the fit finds every marker's bone by itself.
 NO_TRACKING = "studio_no_tracking"
 # What the thesis's worst case keeps (thesis 4.3): the pelvis, head, hand and toe markers.
@@ -53,10 +57,11 @@ def cases(profile: Profile, labels: list[str], start: int) -> list[Case]:
     return out
 
 
-def solve(method: str, markers: np.ndarray, rec: Recording, profile: Profile):
-    """(positions (F, J, 3), status (F, J), residual RMS per frame or None) of one method."""
-    if method == "fit":
-        chunk, residual, _ = fit_take(markers, rec.labels, profile, rec.rate_hz)
+def solve(method: str, markers: np.ndarray, rec: Recording, profile: Profile, subject: Subject | None = None):
+    """(positions (F, J, 3), status (F, J), residual RMS per frame or None) of one method; ``subject``: the
+    calibrated subject that ``fit_subject`` fits."""
+    if method.startswith("fit"):
+        chunk, residual, _ = fit_take(markers, rec.labels, profile, rec.rate_hz, subject)
         return chunk.positions, chunk.status, residual
     if method == NO_TRACKING:
         method, profile = "studio", profile.model_copy(update={"tracking": {}})
@@ -70,15 +75,22 @@ def bone_lengths(positions: np.ndarray) -> np.ndarray:
     return np.linalg.norm(positions[:, LIMB_BONES] - positions[:, PARENT_INDEX[list(LIMB_BONES)]], axis=-1)
 
 
-def references(rec: Recording, profile: Profile) -> dict[str, np.ndarray]:
+@dataclass
+class Reference:
+    positions: dict[str, np.ndarray]   # each method's solve of the complete take
+    subject: Subject                   # calibrated from the complete take
+
+
+def references(rec: Recording, profile: Profile) -> Reference:
     """Each method's solve of the complete take: the localization for the thesis's method and the studio
     options (nothing to fill), the fit calibrated on the complete take for the fit."""
     located = localize_take(rec, profile)[0]
-    return {"thesis": located, "studio": located, NO_TRACKING: located,
-            "fit": solve("fit", rec.positions, rec, profile)[0]}
+    chunk, _, subject = fit_take(rec.positions, rec.labels, profile, rec.rate_hz)
+    return Reference({"thesis": located, "studio": located, NO_TRACKING: located, "fit": chunk.positions,
+                      "fit_subject": chunk.positions}, subject)
 
 
-def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, np.ndarray]):
+def run_case(case: Case, rec: Recording, profile: Profile, reference: Reference):
     """One row per method: hidden joints' mean / max error (mm) against the method's own solve of the complete
     take, and against the localization's (``loc_``); bone-length CV (%) and largest deviation from the bone's
     own median length (%); the fit's marker residual RMS (mm); and the share of hidden frames estimated."""
@@ -87,9 +99,12 @@ def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, 
     hide = [col.index(x) for x in case.hidden]
     markers[case.start:, hide] = np.nan
     rows = []
-    methods = METHODS + ((NO_TRACKING,) if case.name.startswith("elbow") and profile.tracking else ())
+    # with nothing hidden the subject's fit is the fit
+    methods = tuple(m for m in METHODS if case.hidden or m != "fit_subject")
+    methods += (NO_TRACKING,) if case.name.startswith("elbow") and profile.tracking else ()
     for method in methods:
-        pos, status, residual = solve(method, markers, rec, profile)
+        subject = reference.subject if method == "fit_subject" else None
+        pos, status, residual = solve(method, markers, rec, profile, subject)
         row = {"case": case.name, "method": method}
         lengths = bone_lengths(pos)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -99,14 +114,14 @@ def run_case(case: Case, rec: Recording, profile: Profile, reference: dict[str, 
         row["residual_mm"] = float(np.nanmean(residual) * 1000) if residual is not None else float("nan")
         if case.measured:
             j = [INDEX[n] for n in case.measured]
-            for prefix, ref in (("", reference[method]), ("loc_", reference["thesis"])):
+            for prefix, ref in (("", reference.positions[method]), ("loc_", reference.positions["thesis"])):
                 err = np.linalg.norm(pos[case.start:, j] - ref[case.start:, j], axis=-1) * 1000
                 ok = np.isfinite(ref[case.start:, j]).all(axis=-1)
                 row["estimated_pct"] = float(np.isfinite(err[ok]).mean() * 100)
                 row[prefix + "mean_mm"] = float(np.nanmean(err[ok]))
                 row[prefix + "max_mm"] = float(np.nanmax(err[ok]))
         if not case.hidden:  # the take's own gaps: a whole skeleton every frame, and no twitch where they begin or end
-            known = np.isfinite(reference[method]).all(axis=2).any(axis=0)
+            known = np.isfinite(reference.positions[method]).all(axis=2).any(axis=0)
             row["complete_pct"] = float(np.isfinite(pos[:, known]).all(axis=2).all(axis=1).mean() * 100)
             moves = real_gap_moves(pos, status).row()
             row["changes_over_1_5"], row["changes_max"] = moves["paced_over_1_5"], moves["paced_max"]
