@@ -4,6 +4,7 @@
 name: studio                 # graph name (default: the file's stem)
 namespace: ""                # optional topic prefix, e.g. mocap/actor1
 transport: {kind: ipc}       # or {kind: tcp, host: 127.0.0.1, base_port: 7100}
+actors: [actor1, actor2]     # optional: a copy of each per_actor node per actor (or {actor1: {fit.subject: a.yaml}})
 nodes:
   - id: source               # unique
     kind: file_source        # a name from nodes/registry.py, or package.module:Class
@@ -11,10 +12,12 @@ nodes:
     remaps: {markers/raw: markers/raw_take1}
     replicas: 1              # >1 runs N processes that split frames by frame number
     container: core          # optional: nodes with the same container share one process (inproc links)
+    per_actor: true          # one copy per actor: id hips-actor1, topics under mocap/actor1/, container core-actor1
 ```
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Literal
 
@@ -55,6 +58,9 @@ class NodeEntry(BaseModel):
     container: str | None = Field(None, pattern=r"^[A-Za-z0-9_\-]+$",
                                   description="run in one OS process with the other nodes of this name, wired "
                                   "over inproc sockets (ROS 2's component containers): far less CPU a frame")
+    per_actor: bool = Field(False, description="one copy per actor of the launch file's actors:, its topics under "
+                            "mocap/<actor>/, {actor} in its text params replaced, and its port, if it has one, the "
+                            "node's plus the actor's place in the list")
 
 
 class LaunchFile(BaseModel):
@@ -62,7 +68,49 @@ class LaunchFile(BaseModel):
     name: str = "graph"
     namespace: str = ""
     transport: Transport = Transport()
+    actors: dict[str, dict[str, Any]] = Field(default_factory=dict, description="the subjects in the stream (their "
+                                              "labels' prefix), each with its own NODE.PARAM values if it needs them")
     nodes: list[NodeEntry]
+
+    @field_validator("actors", mode="before")
+    @classmethod
+    def _actor_list(cls, v):
+        if isinstance(v, list):
+            return {str(a): {} for a in v}
+        return {a: ({} if params is None else params) for a, params in v.items()} if isinstance(v, dict) else v
+
+    @model_validator(mode="after")
+    def _actors_and_their_nodes(self):
+        per_actor = {n.id for n in self.nodes if n.per_actor}
+        if per_actor and not self.actors:
+            raise ValueError(f"nodes {', '.join(sorted(per_actor))} are per_actor, but the file lists no actors:")
+        if self.actors and not per_actor:
+            raise ValueError("actors: is given, but no node is per_actor: true (mark the solving pipeline's nodes)")
+        for actor, values in self.actors.items():
+            if not re.match(r"^[A-Za-z0-9_\-]+$", actor):
+                raise ValueError(f"actor {actor!r}: letters, digits, _ and - only (it names topics and nodes)")
+            for key in values:
+                node, dot, param = key.partition(".")
+                if not dot or node not in per_actor or not param:
+                    raise ValueError(f"actor {actor}: {key!r} is not NODE.PARAM of a per_actor node "
+                                     f"({', '.join(sorted(per_actor))})")
+        return self
+
+    def copies(self, entry: NodeEntry, port_default: int | None = None) -> list[tuple[NodeEntry, str]]:
+        """``entry`` as the graph runs it, with each copy's namespace: itself, or one per actor (see per_actor)."""
+        if not entry.per_actor:
+            return [(entry, self.namespace)]
+        out = []
+        for i, (actor, values) in enumerate(self.actors.items()):
+            params = {k: v.replace("{actor}", actor) if isinstance(v, str) else v for k, v in entry.params.items()}
+            port = params.get("port", port_default)
+            if isinstance(port, int) and port > 0:
+                params["port"] = port + i
+            params.update({k.partition(".")[2]: v for k, v in values.items() if k.partition(".")[0] == entry.id})
+            copy = entry.model_copy(update={"id": f"{entry.id}-{actor}", "params": params,
+                                            "container": entry.container and f"{entry.container}-{actor}"})
+            out.append((copy, "/".join(x for x in (self.namespace.strip("/"), "mocap", actor) if x)))
+        return out
 
     @field_validator("nodes")
     @classmethod
@@ -98,7 +146,8 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     key, eq, value = text.partition("=")
     node, dot, param = key.partition(".")
     if not eq or not dot or not node or not param:
-        raise LaunchError(f"--set {text!r}: expected NODE.PARAM=VALUE, e.g. --set solver.solver=fabrik")
+        raise LaunchError(f"--set {text!r}: expected NODE.PARAM=VALUE, e.g. --set solver.solver=fabrik, or "
+                          "actors=[alice, bob]")
     return node, param, yaml.safe_load(value) if value else ""
 
 
@@ -139,6 +188,9 @@ def load_launch_file(path: str | Path, overrides: list[str] = ()) -> LaunchFile:
     raw.setdefault("name", path.stem)
     by_id = {n.get("id"): n for n in raw["nodes"] if isinstance(n, dict)}
     for text in overrides:
+        if text.partition("=")[0].strip() == "actors":  # the graph's own list: --set 'actors=[alice, bob]'
+            raw["actors"] = yaml.safe_load(text.partition("=")[2])
+            continue
         node, param, value = parse_override(text)
         if node not in by_id:
             raise LaunchError(f"--set {text!r}: no node {node!r} in {path} (nodes: {', '.join(map(str, by_id))})")

@@ -14,6 +14,7 @@
 """
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import os
@@ -30,7 +31,7 @@ from pathlib import Path
 import zmq
 
 from mocap_cli.graph_registry import registry_path, write_registry
-from mocap_cli.launch_file import LaunchError, LaunchFile
+from mocap_cli.launch_file import LaunchError, LaunchFile, NodeEntry
 from nodes.registry import UnknownKind, load_kind
 from nodes.runtime import DIAGNOSTICS, inproc_endpoint
 from nodes.spec import NodeSpec
@@ -104,37 +105,18 @@ def group(procs: list[Proc]) -> list[Process]:
 def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
     """Turn a launch file into one NodeSpec per process, with endpoints and expected subscribers."""
     procs: list[Proc] = []
-    port = lf.transport.base_port
-    for entry in lf.nodes:
+    tcp_ports = itertools.count(lf.transport.base_port + 1)
+    for template in lf.nodes:
         try:
-            cls = load_kind(entry.kind)
+            cls = load_kind(template.kind)
         except UnknownKind as e:
-            raise LaunchError(f"node {entry.id}: {e}") from None
-        try:
-            params = cls.Params.model_validate(entry.params)
-        except Exception as e:
-            raise LaunchError(f"node {entry.id} ({entry.kind}): bad params: {e}") from None
-        inputs, outputs = cls.inputs(params), cls.outputs(params)
-        for k in range(entry.replicas):
-            pid = entry.id if entry.replicas == 1 else f"{entry.id}#{k}"
-            if entry.endpoint:
-                endpoint = entry.endpoint
-            elif lf.transport.kind == "tcp":
-                port += 1
-                endpoint = f"tcp://{lf.transport.host}:{port}"
-            else:
-                endpoint = f"ipc://{sock_dir}/{pid.replace('#', '-')}.pub"
-            spec = NodeSpec(id=pid, kind=entry.kind, graph=lf.name, params=entry.params, remaps=entry.remaps,
-                            namespace=lf.namespace, pub_endpoint=endpoint, control_endpoint=control_endpoint,
-                            replica=k, replicas=entry.replicas, hwm=entry.hwm, keep_last=entry.keep_last,
-                            curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
-                            else None)
-            if entry.container and cls.is_source:
-                raise LaunchError(f"node {entry.id}: a source ends its process when it finishes, so it cannot "
-                                  f"be in container {entry.container!r}")
-            procs.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn, container=entry.container,
-                              publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
-                              subscribes=[spec.wire_topic(t) for t in inputs]))
+            raise LaunchError(f"node {template.id}: {e}") from None
+        if lf.actors and not template.per_actor and "actors" in cls.Params.model_fields:
+            # a source splits the stream for the actors; an output shows them all
+            template = template.model_copy(update={"params": {"actors": list(lf.actors), **template.params}})
+        port = cls.Params.model_fields.get("port")
+        for entry, namespace in lf.copies(template, port.default if port else None):
+            procs += _node_procs(lf, entry, namespace, cls, sock_dir, control_endpoint, tcp_ports)
     for sub in procs:
         for topic in sub.subscribes:
             pubs = [p for p in procs if topic in p.publishes and p is not sub]
@@ -152,6 +134,37 @@ def plan(lf: LaunchFile, sock_dir: str, control_endpoint: str) -> list[Proc]:
     for node_id, topic in unfed:
         log.warning("node %s subscribes to %s but no node in the graph publishes it", node_id, topic)
     return procs
+
+
+def _node_procs(lf: LaunchFile, entry: NodeEntry, namespace: str, cls, sock_dir: str, control_endpoint: str,
+                tcp_ports) -> list[Proc]:
+    """One launch-file node (or one actor's copy of it) as its processes: one, or one per replica."""
+    try:
+        params = cls.Params.model_validate(entry.params)
+    except Exception as e:
+        raise LaunchError(f"node {entry.id} ({entry.kind}): bad params: {e}") from None
+    if entry.container and cls.is_source:
+        raise LaunchError(f"node {entry.id}: a source ends its process when it finishes, so it cannot "
+                          f"be in container {entry.container!r}")
+    inputs, outputs = cls.inputs(params), cls.outputs(params)
+    out = []
+    for k in range(entry.replicas):
+        pid = entry.id if entry.replicas == 1 else f"{entry.id}#{k}"
+        if entry.endpoint:
+            endpoint = entry.endpoint
+        elif lf.transport.kind == "tcp":
+            endpoint = f"tcp://{lf.transport.host}:{next(tcp_ports)}"
+        else:
+            endpoint = f"ipc://{sock_dir}/{pid.replace('#', '-')}.pub"
+        spec = NodeSpec(id=pid, kind=entry.kind, graph=lf.name, params=entry.params, remaps=entry.remaps,
+                        namespace=namespace, pub_endpoint=endpoint, control_endpoint=control_endpoint,
+                        replica=k, replicas=entry.replicas, hwm=entry.hwm, keep_last=entry.keep_last,
+                        curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
+                        else None)
+        out.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn, container=entry.container,
+                        publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
+                        subscribes=[spec.wire_topic(t) for t in inputs]))
+    return out
 
 
 def _same_container(a: Proc, b: Proc) -> bool:

@@ -147,6 +147,36 @@ def _read_c3d(path: Path) -> Recording:
     return _finish(labels, xyz, units, rate, str(path), first)
 
 
+def write_c3d(rec: Recording, path: str | Path) -> None:
+    """``rec`` as a C3D file (metres; an occluded marker has residual -1, as C3D says)."""
+    import ezc3d
+
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [rec.rate_hz]
+    c["parameters"]["POINT"]["LABELS"]["value"] = list(rec.labels)
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["m"]
+    pts = np.ones((4, len(rec.labels), rec.n_frames))
+    xyz = np.transpose(rec.positions, (2, 1, 0))
+    seen = np.isfinite(xyz).all(axis=0)
+    pts[:3] = np.where(seen, xyz, 0.0)
+    c["data"]["points"] = pts
+    c["data"]["meta_points"]["residuals"] = np.where(seen, 0.0, -1.0)[None]
+    c.write(str(path))
+
+
+def crowd(rec: Recording, actors: list[str], spacing_m: float = 3.0) -> Recording:
+    """A take of several actors, each ``rec`` moved ``spacing_m`` further along x and named ``actor:LABEL``, as
+    QTM and Vicon stream several labelled subjects."""
+    names = [label.rsplit(":", 1)[-1] for label in rec.labels]
+    shift = np.zeros(3, np.float32)
+    parts = []
+    for i, _ in enumerate(actors):
+        shift[0] = i * spacing_m
+        parts.append(rec.positions + shift)
+    return Recording([f"{a}:{n}" for a in actors for n in names], np.concatenate(parts, axis=1), rec.rate_hz,
+                     f"{rec.source} x{len(actors)}", rec.first_frame, rec.meta)
+
+
 def _c3d_header_frames(path: Path) -> int | None:
     """Frame count from the raw C3D header (ezc3d silently shortens a truncated file)."""
     import struct

@@ -15,6 +15,7 @@ from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, Messag
 from mocap_core.recordings import read_recording
 from mocap_core.world import normalize_up
 from nodes.lockstep import Lockstep
+from nodes.actor_split import ActorSplit, actor_topics
 from nodes.runtime import Node
 
 SET_PERIOD_S = 1.0
@@ -40,6 +41,9 @@ class Params(BaseModel):
     lockstep_timeout_s: float = Field(2.0, gt=0)
     up_axis: str | None = Field(None, description="the recording's up axis (+z, -y, ...), over what the file "
                                 "says; unset: the file's, else the profile's")
+    actors: list[str] = Field(default_factory=list, description="split the stream by the subject in front of "
+                              "each label (actor1:LASI) onto mocap/<actor>/markers/raw; the launch file's actors: "
+                              "sets it")
 
     @field_validator("up_axis")
     @classmethod
@@ -52,6 +56,10 @@ class FileSource(Node):
     Params = Params
     publishes = {"markers/raw": MarkerFrame, "markers/set": MarkerSet}
     is_source = True
+
+    @classmethod
+    def outputs(cls, params):
+        return {**cls.publishes, **actor_topics(params.actors)}
 
     @classmethod
     def inputs(cls, params):
@@ -70,6 +78,7 @@ class FileSource(Node):
         self.next_set = 0.0
         self.up_axis = p.up_axis or self.rec.meta.get("up_axis", "")
         self.lockstep = Lockstep(self.ctx, p.lockstep_topic, p.lockstep_timeout_s)
+        self.split = ActorSplit(self.ctx, p.actors, self.log)
         self.log.info("replaying %s: %d markers, %d frames at %.0f Hz", self.rec.source, len(self.rec.labels),
                       self.rec.n_frames, self.rate)
 
@@ -85,13 +94,13 @@ class FileSource(Node):
             return None
         now = time.monotonic()
         if now >= self.next_set:
-            self.ctx.publish("markers/set", MarkerSet(header=self._header(0, 0.0), labels=rec.labels,
-                                                      rate_hz=self.rate, source=rec.source))
+            self.split.publish("markers/set", MarkerSet(header=self._header(0, 0.0), labels=rec.labels,
+                                                        rate_hz=self.rate, source=rec.source))
             self.next_set = now + SET_PERIOD_S
         pos = rec.positions[self.index]
         flags = np.where(np.isnan(pos).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         frame = rec.first_frame + self.index
-        self.ctx.publish("markers/raw", MarkerFrame(
+        self.split.publish("markers/raw", MarkerFrame(
             header=self._header(frame, self.index / rec.rate_hz),
             labels=rec.labels, positions=pos, flags=flags))
         self.index += 1

@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet
 from mocap_core.world import DEFAULT_UP, normalize_up
 from nodes.qtm_guard import GuardedReceiver
+from nodes.actor_split import ActorSplit, actor_topics
 from nodes.runtime import Node
 
 UNITS_M = 0.001  # QTM streams millimetres
@@ -42,6 +43,9 @@ class Params(BaseModel):
     stall_s: float = Field(1.0, ge=0, description="no frame for this long, and QTM did not say it stopped: "
                                                   "an error and a reconnect (0 = never)")
     up_axis: str | None = Field(None, description="the world's up axis (+z, -y, ...) over QTM's AxisUpwards")
+    actors: list[str] = Field(default_factory=list, description="split the stream by the subject in front of "
+                              "each label (actor1:LASI) onto mocap/<actor>/markers/raw; the launch file's actors: "
+                              "sets it")
 
     @field_validator("up_axis")
     @classmethod
@@ -55,8 +59,13 @@ class QtmIngest(Node):
     publishes = {"markers/raw": MarkerFrame, "markers/set": MarkerSet}
     is_source = True
 
+    @classmethod
+    def outputs(cls, params):
+        return {**cls.publishes, **actor_topics(params.actors)}
+
     def setup(self) -> None:
         self.inbox: queue.Queue = queue.Queue(maxsize=10000)
+        self.split = ActorSplit(self.ctx, self.params.actors, self.log)
         self.labels: list[str] = []
         self.up_axis = self.params.up_axis or DEFAULT_UP
         self.stopping = threading.Event()
@@ -81,9 +90,9 @@ class QtmIngest(Node):
             elif kind == "set":
                 self.labels, rate, up = payload
                 self.up_axis = self.params.up_axis or up
-                self.ctx.publish("markers/set", MarkerSet(header=MarkerSet.make_header(up_axis=self.up_axis),
-                                                          labels=self.labels, rate_hz=rate,
-                                                          source=f"qtm://{self.params.host}"))
+                self.split.publish("markers/set", MarkerSet(header=MarkerSet.make_header(up_axis=self.up_axis),
+                                                            labels=self.labels, rate_hz=rate,
+                                                            source=f"qtm://{self.params.host}"))
             elif kind == "frame":
                 self._publish_frame(*payload)
             elif kind == "error":
@@ -102,7 +111,7 @@ class QtmIngest(Node):
             return
         pos = (xyz_mm * UNITS_M).astype(np.float32)
         flags = np.where(np.isnan(pos).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
-        self.ctx.publish("markers/raw", MarkerFrame(
+        self.split.publish("markers/raw", MarkerFrame(
             header=MarkerFrame.make_header(frame, timestamp_us / 1e6, received_ns, self.up_axis), labels=self.labels,
             positions=pos, flags=flags))
 

@@ -23,6 +23,10 @@ class Params(BaseModel):
     path: str = Field(description="output .mcap file")
     topics: list[str] = Field(default_factory=lambda: ["markers/raw"], description="logical topics to record")
     launch_file: str = ""
+    actor_topics: list[str] = Field(default_factory=list, description="logical topics to record for each actor "
+                                    "(mocap/<actor>/<topic>), e.g. skeleton/solved")
+    actors: list[str] = Field(default_factory=list, description="the actors of actor_topics; the launch file's "
+                              "actors: sets it")
 
 
 class Recorder(Node):
@@ -32,7 +36,7 @@ class Recorder(Node):
 
     @classmethod
     def inputs(cls, params):
-        return {t: Message for t in params.topics}
+        return {t: Message for t in params.topics + [f"mocap/{a}/{t}" for a in params.actors for t in params.actor_topics]}
 
     def setup(self) -> None:
         import mcap

@@ -173,7 +173,8 @@ def emulator(tmp_path, *args, port=0, file="12_vicon_freeform_realgaps_nimble_ni
     ready = tmp_path / f"port-{os.getpid()}-{port}"
     ready.unlink(missing_ok=True)
     log = open(tmp_path / "qtm_sim.log", "a")
-    proc = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "qtm-sim", str(data_file(file)), "--port",
+    take = file if Path(file).is_absolute() else data_file(file)  # a shared recording, or one a test wrote
+    proc = subprocess.Popen([sys.executable, "-m", "mocap_cli.main", "qtm-sim", str(take), "--port",
                              str(port), "--ready-file", str(ready), *args], cwd=REPO, stdout=log,
                             stderr=subprocess.STDOUT)
     try:

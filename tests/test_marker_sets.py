@@ -3,10 +3,8 @@ named with what they need, several actors refused; each with its message and exi
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
-from mocap_core.recordings import Recording
 from tests.conftest import REPO, data_file
 
 KARATE = "08_cmu_135_02_karate_kata.c3d"
@@ -67,23 +65,10 @@ def test_a_profile_that_cannot_locate_some_joints_is_refused_and_named(tmp_path)
 
 
 def test_several_actors_in_one_take_are_refused(tmp_path):
-    import ezc3d
+    from mocap_core.recordings import crowd, read_recording, write_c3d
 
-    from mocap_core.recordings import read_recording
-
-    rec = read_recording(data_file(KARATE)).slice(0, 120)
-    names = [label.rsplit(":", 1)[-1] for label in rec.labels]
-    both = Recording([f"actor1:{n}" for n in names] + [f"actor2:{n}" for n in names],
-                     np.concatenate([rec.positions, rec.positions + np.float32([3, 0, 0])], axis=1), rec.rate_hz)
-    c = ezc3d.c3d()
-    c["parameters"]["POINT"]["RATE"]["value"] = [both.rate_hz]
-    c["parameters"]["POINT"]["LABELS"]["value"] = both.labels
-    c["parameters"]["POINT"]["UNITS"]["value"] = ["m"]
-    pts = np.ones((4, len(both.labels), both.n_frames))
-    pts[:3] = np.transpose(both.positions, (2, 1, 0))
-    c["data"]["points"] = pts
     path = tmp_path / "two_actors.c3d"
-    c.write(str(path))
+    write_c3d(crowd(read_recording(data_file(KARATE)).slice(0, 120), ["actor1", "actor2"]), path)
     for profile in ("auto", "cmu41"):
         r = mocap("solve", str(path), "--profile", profile, "--joints-out", str(tmp_path / "j.csv"), "--quiet")
         assert r.returncode == 2, (profile, r.stderr)

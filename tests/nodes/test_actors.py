@@ -1,0 +1,143 @@
+"""Several actors in one stream: the source splits it by the labels' subject, the launcher runs one pipeline per
+actor, and each actor's skeleton is what solving that actor alone gives."""
+import logging
+import time
+
+import numpy as np
+import pytest
+
+from messages import MarkerFrame, MarkerSet, decode
+from mocap_cli.launch_file import LaunchError, load_launch_file
+from mocap_cli.launcher import plan
+from mocap_core.pipeline import SkeletonPipeline
+from mocap_core.profiles import load_profile
+from mocap_core.recordings import crowd, read_recording, write_c3d
+from nodes.actor_split import ActorSplit
+from nodes.bags import read_bag
+from tests.conftest import REPO, data_file, emulator, free_port, launched, wait_for
+
+KARATE = "08_cmu_135_02_karate_kata.c3d"
+ACTORS_YAML = """
+name: two
+actors: {actor1: {}, actor2: {log.path: /tmp/second.csv}}
+nodes:
+  - id: source
+    kind: file_source
+    params: {path: take.c3d}
+  - id: hips
+    kind: hip_interpolation
+    container: core
+    per_actor: true
+  - id: vmc
+    kind: vmc_output
+    per_actor: true
+    params: {port: 40000}
+  - id: log
+    kind: frame_log
+    per_actor: true
+    params: {path: "/tmp/{actor}.csv"}
+    remaps: {in: markers/filled}
+"""
+
+
+def test_the_launcher_runs_a_copy_of_each_per_actor_node_for_each_actor(tmp_path):
+    path = tmp_path / "two.yaml"
+    path.write_text(ACTORS_YAML)
+    procs = {p.spec.id: p for p in plan(load_launch_file(path), str(tmp_path), "ipc://x")}
+    assert set(procs) == {"source", "hips-actor1", "hips-actor2", "vmc-actor1", "vmc-actor2", "log-actor1",
+                          "log-actor2"}
+    assert procs["source"].spec.params["actors"] == ["actor1", "actor2"]          # the source splits for them
+    assert procs["hips-actor2"].subscribes == ["mocap/actor2/markers/raw"]
+    assert procs["hips-actor2"].spec.sub_endpoints["mocap/actor2/markers/raw"] == [procs["source"].spec.pub_endpoint]
+    assert procs["source"].spec.expected_subscribers == {"mocap/actor1/markers/raw": 1, "mocap/actor2/markers/raw": 1}
+    assert procs["hips-actor1"].container == "core-actor1"                         # a process per actor
+    assert [procs[f"vmc-actor{i}"].spec.params["port"] for i in (1, 2)] == [40000, 40001]
+    assert procs["log-actor1"].spec.params["path"] == "/tmp/actor1.csv"           # {actor} in text params
+    assert procs["log-actor2"].spec.params["path"] == "/tmp/second.csv"           # the actor's own value wins
+    assert procs["log-actor2"].subscribes == ["mocap/actor2/markers/filled"]
+    again = plan(load_launch_file(path, ["actors=[alice, bob, carol]"]), str(tmp_path), "ipc://x")
+    assert sorted(p.spec.id for p in again if p.spec.kind == "vmc_output") == ["vmc-alice", "vmc-bob", "vmc-carol"]
+
+
+@pytest.mark.parametrize("change, said", [
+    ("actors: [actor1]\n", "no node is per_actor"),
+    ("actors: {actor1: {nope.port: 1}}\n", "'nope.port' is not NODE.PARAM of a per_actor node"),
+    ("actors: [actor/1]\n", "letters, digits"),
+])
+def test_actor_mistakes_are_refused_with_the_fix(tmp_path, change, said):
+    text = "name: x\n" + change + "nodes:\n  - id: hips\n    kind: hip_interpolation\n"
+    if "nope" in change or "/" in change:
+        text += "    per_actor: true\n"
+    path = tmp_path / "x.yaml"
+    path.write_text(text)
+    with pytest.raises(LaunchError, match=said):
+        load_launch_file(path)
+
+
+class _Ctx:
+    def __init__(self):
+        self.sent = []
+
+    def publish(self, topic, msg, source=None):
+        self.sent.append((topic, msg))
+
+
+def test_the_split_follows_the_labels_and_says_who_is_missing_or_unlisted(caplog):
+    ctx = _Ctx()
+    split = ActorSplit(ctx, ["actor1", "actor2"], logging.getLogger("t"))
+    labels = ["actor1:A", "actor3:A", "actor1:B"]
+    frame = MarkerFrame(header=MarkerFrame.make_header(7, 0.1, 1), labels=labels,
+                        positions=np.arange(9, dtype=np.float32).reshape(3, 3), flags=np.zeros(3, np.uint8))
+    with caplog.at_level(logging.INFO):
+        split.publish("markers/raw", frame)
+    assert [t for t, _ in ctx.sent] == ["markers/raw", "mocap/actor1/markers/raw"]
+    part = ctx.sent[1][1]
+    assert part.labels == ["actor1:A", "actor1:B"] and part.header.frame == 7
+    assert part.positions.tolist() == [[0, 1, 2], [6, 7, 8]]
+    assert "no markers of actor2" in caplog.text and "also holds actor3" in caplog.text
+    # a subject that joins mid-take: QTM's labels change, and their pipeline is fed from then on
+    ctx.sent.clear()
+    split.publish("markers/set", MarkerSet(header=MarkerSet.make_header(), labels=labels + ["actor2:A"], rate_hz=100))
+    assert [t for t, _ in ctx.sent] == ["markers/set", "mocap/actor1/markers/set", "mocap/actor2/markers/set"]
+    assert ctx.sent[2][1].labels == ["actor2:A"]
+
+
+@pytest.mark.timeout(300)
+def test_two_actors_from_qtm_each_solve_as_if_alone(tmp_path):
+    """The karate take and a copy 3 m away (actor2 walks out for a second and comes back), streamed by the QTM
+    emulator to launch/qtm_actors.yaml: each actor's skeleton equals the offline solve of that actor's markers alone,
+    over the frames the graph received."""
+    rec = read_recording(data_file(KARATE)).slice(0, 1440)
+    two = crowd(rec, ["actor1", "actor2"])
+    gone = [i for i, x in enumerate(two.labels) if x.startswith("actor2:")]
+    two.positions[900:1020, gone] = np.nan
+    take = tmp_path / "two_actors.c3d"
+    write_c3d(two, take)
+    bag = tmp_path / "actors.mcap"
+    text = (REPO / "launch" / "qtm_actors.yaml").read_text() + (
+        f"  - id: rec\n    kind: recorder\n    params: {{path: {bag}, topics: [markers/raw], "
+        f"actor_topics: [skeleton/solved]}}\n")
+    with emulator(tmp_path, file=take) as (_, port):
+        with launched(tmp_path, text, "--set", f"qtm.port={port}", "--set", f"vmc.port={free_port()}") as g:
+            wait_for(lambda: " ready in " in g.log() or g.proc.poll() is not None, 120, "the graph")
+            assert g.proc.poll() is None, g.log()
+            time.sleep(two.n_frames / two.rate_hz + 2)
+    raw, solved = {}, {}
+    for m in read_bag(bag):
+        msg = decode(m.data, m.topic)
+        if m.topic == "markers/raw":
+            raw[msg.header.frame] = msg
+        else:
+            solved.setdefault(m.topic.split("/")[1], {})[msg.header.frame] = np.asarray(msg.positions)
+    frames = sorted(raw)
+    # every frame from the first the graph was ready for, actor2's absence among them
+    assert frames[0] < 800 and frames[-1] == two.n_frames - 1 and frames[-1] - frames[0] + 1 == len(frames)
+    labels = raw[frames[0]].labels
+    for actor in ("actor1", "actor2"):
+        cols = [i for i, x in enumerate(labels) if x.startswith(f"{actor}:")]
+        markers = np.stack([raw[f].positions[cols] for f in frames]).astype(np.float64)
+        alone = SkeletonPipeline(load_profile("cmu41"), [labels[i] for i in cols], beyond=True, rate_hz=two.rate_hz)
+        want = np.concatenate([c.positions for c in alone.run(markers)])
+        got = np.stack([solved[actor][f] for f in frames])
+        assert np.array_equal(np.isnan(got), np.isnan(want)), actor
+        assert np.nanmax(np.abs(got - want)) <= 0.001, (actor, np.nanmax(np.abs(got - want)))
