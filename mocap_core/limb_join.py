@@ -17,6 +17,10 @@ from mocap_core.skeleton import INDEX, Status
 
 LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
 RESTART_JUMP = 10  # frames
+# Limbs are solved from their frame's torso, so limbs here without it mean the torso is still queued (a stage reads
+# its inputs in turn, and after a stall a backlog of limbs can come first), not lost: they wait for it until a later
+# frame's torso shows it was lost on the way, or for this long.
+TORSO_LOST_S = 1.0
 LIMB_INDEX = {limb: np.array([INDEX[j] for j in LIMB_CHAINS[limb]]) for limb in LIMBS}
 
 
@@ -43,13 +47,15 @@ class FrameJoiner:
         self.pending: dict[int, _Pending] = {}
         self.last: dict[str, tuple] = {}   # limb -> last (positions, frames, status)
         self.released_up_to = -1 << 62
+        self.torso_up_to = -1 << 62   # the newest frame whose torso came
         self.late = 0
 
     def _restarted(self, frame: int) -> bool:
-        """Frame numbers that jump back (a looping take, a QTM restart) start a new stream."""
-        if frame < self.released_up_to - RESTART_JUMP:
+        """Torso frame numbers that jump back (a looping take, a QTM restart) start a new stream. Only the torso's
+        say so: they come in order, where limbs may lag many frames behind on a busy machine."""
+        if frame < self.torso_up_to - RESTART_JUMP:
             self.pending.clear()
-            self.released_up_to = -1 << 62
+            self.released_up_to = self.torso_up_to = -1 << 62
             return True
         return False
 
@@ -59,10 +65,10 @@ class FrameJoiner:
             self.late += 1
             return []
         self.pending.setdefault(frame, _Pending(now_s)).torso = (positions, frames, status, source)
+        self.torso_up_to = max(self.torso_up_to, frame)
         return self.release(now_s)
 
     def add_limb(self, frame: int, now_s: float, limb: str, positions, frames, status) -> list[Joined]:
-        self._restarted(frame)
         if frame <= self.released_up_to:
             self.late += 1
             return []
@@ -79,8 +85,8 @@ class FrameJoiner:
             overdue = now_s - p.arrived_s >= self.max_wait_s
             superseded = newest_complete is not None and f < newest_complete
             if not (done or ((overdue or superseded) and p.torso is not None)):
-                if overdue and p.torso is None:  # limbs without a torso: nothing to join them to
-                    del self.pending[f]
+                if p.torso is None and (self.torso_up_to > f or now_s - p.arrived_s >= TORSO_LOST_S):
+                    del self.pending[f]  # its torso was lost: nothing to join the limbs to
                     self.released_up_to = max(self.released_up_to, f)
                     continue
                 break  # keep frames in order

@@ -64,3 +64,29 @@ def test_frame_numbers_jumping_back_start_a_new_stream():
     for name in LIMBS:
         out += j.add_limb(3, 0.0, name, *limb(name, 1.0))
     assert [o.frame for o in out] == [3]
+
+
+def test_limbs_that_come_before_their_torso_wait_for_it():
+    """After a stall a stage may read a backlog of limbs before the torso queued beside them: the frames are
+    joined when the torsos come, however long after max_wait_s; limbs whose torso was lost go once a later one comes."""
+    j = FrameJoiner(max_wait_s=0.02)
+    for f in (1, 2, 3):
+        for name in LIMBS:
+            assert j.add_limb(f, 0.001 * f, name, *limb(name, 1.0)) == []
+    out = j.add_torso(2, 0.2, *torso())  # frame 1's torso never comes; frame 2's, 200 ms late
+    out += j.add_torso(3, 0.2, *torso())
+    assert [o.frame for o in out] == [2, 3] and all(o.held_limbs == [] for o in out) and j.late == 0
+
+
+def test_limbs_lagging_many_frames_behind_lose_no_frame():
+    """On a busy machine the limbs can fall 20 frames behind the torso: their frames go out held, in order, and
+    the limbs' old frame numbers are late limbs, not a stream that started again."""
+    j = FrameJoiner(max_wait_s=0.02)
+    out = []
+    for f in range(30):
+        out += j.add_torso(f, f * 0.005, *torso())
+    for f in range(30):
+        for name in LIMBS:
+            out += j.add_limb(f, 0.15 + f * 0.001, name, *limb(name, 1.0))
+    out += j.release(1.0)
+    assert [o.frame for o in out] == list(range(30))
