@@ -5,6 +5,7 @@ name: studio                 # graph name (default: the file's stem)
 namespace: ""                # optional topic prefix, e.g. mocap/actor1
 transport: {kind: ipc}       # or {kind: tcp, host: 127.0.0.1, base_port: 7100}
 actors: [actor1, actor2]     # optional: a copy of each per_actor node per actor (or {actor1: {fit.subject: a.yaml}})
+hosts: {stage: 10.0.0.5}     # optional, tcp only: machines by name; a node's (or an actor's) host: runs it there
 nodes:
   - id: source               # unique
     kind: file_source        # a name from nodes/registry.py, or package.module:Class
@@ -13,6 +14,7 @@ nodes:
     replicas: 1              # >1 runs N processes that split frames by frame number
     container: core          # optional: nodes with the same container share one process (inproc links)
     per_actor: true          # one copy per actor: id hips-actor1, topics under mocap/actor1/, container core-actor1
+    host: stage              # run by `mocap launch FILE --host stage` on that machine (default: without --host)
 ```
 """
 from __future__ import annotations
@@ -58,6 +60,8 @@ class NodeEntry(BaseModel):
     container: str | None = Field(None, pattern=r"^[A-Za-z0-9_\-]+$",
                                   description="run in one OS process with the other nodes of this name, wired "
                                   "over inproc sockets (ROS 2's component containers): far less CPU a frame")
+    host: str | None = Field(None, description="the name (in hosts:) of the machine that runs it: `mocap launch "
+                             "FILE --host NAME` there; without host:, the launch without --host runs it")
     per_actor: bool = Field(False, description="one copy per actor of the launch file's actors:, its topics under "
                             "mocap/<actor>/, {actor} in its text params replaced, and its port, if it has one, the "
                             "node's plus the actor's place in the list")
@@ -70,6 +74,8 @@ class LaunchFile(BaseModel):
     transport: Transport = Transport()
     actors: dict[str, dict[str, Any]] = Field(default_factory=dict, description="the subjects in the stream (their "
                                               "labels' prefix), each with its own NODE.PARAM values if it needs them")
+    hosts: dict[str, str] = Field(default_factory=dict, description="machines by name: the address each binds "
+                                  "its nodes' tcp endpoints on and the others connect to")
     nodes: list[NodeEntry]
 
     @field_validator("actors", mode="before")
@@ -91,10 +97,31 @@ class LaunchFile(BaseModel):
                 raise ValueError(f"actor {actor!r}: letters, digits, _ and - only (it names topics and nodes)")
             for key in values:
                 node, dot, param = key.partition(".")
+                if key == "host":
+                    continue
                 if not dot or node not in per_actor or not param:
                     raise ValueError(f"actor {actor}: {key!r} is not NODE.PARAM of a per_actor node "
-                                     f"({', '.join(sorted(per_actor))})")
+                                     f"({', '.join(sorted(per_actor))}), or host")
         return self
+
+    @model_validator(mode="after")
+    def _hosts_known(self):
+        named = [(f"node {n.id}", n.host) for n in self.nodes] + [(f"actor {a}", v.get("host"))
+                                                                  for a, v in self.actors.items()]
+        for who, host in named:
+            if host is not None and host not in self.hosts:
+                raise ValueError(f"{who}: host {host!r} is not in hosts: ({', '.join(self.hosts) or 'none given'})")
+        hosts_of = {}
+        for n in self.nodes:
+            if n.container and hosts_of.setdefault(n.container, n.host) != n.host:
+                raise ValueError(f"node {n.id}: container {n.container!r} is one process, on one host")
+        if self.hosts and self.transport.kind != "tcp":
+            raise ValueError("hosts: nodes on several machines talk over tcp; set transport: {kind: tcp}")
+        return self
+
+    def address(self, host: str | None) -> str:
+        """Where the nodes of ``host`` bind and are reached (the transport's host for those without one)."""
+        return self.hosts[host] if host else self.transport.host
 
     def copies(self, entry: NodeEntry, port_default: int | None = None) -> list[tuple[NodeEntry, str]]:
         """``entry`` as the graph runs it, with each copy's namespace: itself, or one per actor (see per_actor)."""
@@ -108,7 +135,8 @@ class LaunchFile(BaseModel):
                 params["port"] = port + i
             params.update({k.partition(".")[2]: v for k, v in values.items() if k.partition(".")[0] == entry.id})
             copy = entry.model_copy(update={"id": f"{entry.id}-{actor}", "params": params,
-                                            "container": entry.container and f"{entry.container}-{actor}"})
+                                            "container": entry.container and f"{entry.container}-{actor}",
+                                            "host": values.get("host", entry.host)})
             out.append((copy, "/".join(x for x in (self.namespace.strip("/"), "mocap", actor) if x)))
         return out
 

@@ -49,6 +49,7 @@ class Proc:
     is_source: bool
     respawn: bool
     container: str | None = None
+    host: str | None = None                 # the launch file's name of the machine that runs it
     ready: bool = False
     identity: bytes | None = None
     publishes: list[str] = field(default_factory=list)
@@ -153,7 +154,7 @@ def _node_procs(lf: LaunchFile, entry: NodeEntry, namespace: str, cls, sock_dir:
         if entry.endpoint:
             endpoint = entry.endpoint
         elif lf.transport.kind == "tcp":
-            endpoint = f"tcp://{lf.transport.host}:{next(tcp_ports)}"
+            endpoint = f"tcp://{lf.address(entry.host)}:{next(tcp_ports)}"
         else:
             endpoint = f"ipc://{sock_dir}/{pid.replace('#', '-')}.pub"
         spec = NodeSpec(id=pid, kind=entry.kind, graph=lf.name, params=entry.params, remaps=entry.remaps,
@@ -162,13 +163,14 @@ def _node_procs(lf: LaunchFile, entry: NodeEntry, namespace: str, cls, sock_dir:
                         curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
                         else None)
         out.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn, container=entry.container,
+                        host=entry.host,
                         publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
                         subscribes=[spec.wire_topic(t) for t in inputs]))
     return out
 
 
 def _same_container(a: Proc, b: Proc) -> bool:
-    return a.container is not None and a.container == b.container
+    return a.container is not None and a.container == b.container and a.host == b.host
 
 
 def _endpoint_for(sub: Proc, pub: Proc) -> str:
@@ -180,7 +182,11 @@ def _endpoint_for(sub: Proc, pub: Proc) -> str:
 
 
 class Launcher:
-    def __init__(self, lf: LaunchFile, launch_path: str = "", on_ready=None):
+    """Runs the nodes of one machine: those of ``host`` (a name in the file's hosts:), or those with no host:. The
+    whole graph is planned, so they connect to the other machines' nodes, and a publisher waits for subscribers
+    there as for local ones."""
+
+    def __init__(self, lf: LaunchFile, launch_path: str = "", on_ready=None, host: str | None = None):
         self.lf = lf
         self.launch_path = launch_path
         self.on_ready = on_ready  # called once, when every node is ready and the sources start
@@ -188,7 +194,12 @@ class Launcher:
         # The launcher's own processes are all on this host, whatever the transport: its control socket is an ipc
         # path in that directory, which no other user can open (over tcp anyone could say "ready").
         self.control_endpoint = f"ipc://{self.sock_dir}/control"
-        self.procs = plan(lf, self.sock_dir, self.control_endpoint)
+        if host is not None and host not in lf.hosts:
+            raise LaunchError(f"--host {host}: not in the launch file's hosts: ({', '.join(lf.hosts) or 'none'})")
+        self.procs = [p for p in plan(lf, self.sock_dir, self.control_endpoint) if p.host == host]
+        if not self.procs:
+            where = f"host {host}" if host else "the machine launched without --host"
+            raise LaunchError(f"no node of the launch file runs on {where}")
         self.processes = group(self.procs)
         self.zctx = zmq.Context()
         self.control = self.zctx.socket(zmq.ROUTER)

@@ -27,9 +27,11 @@ def cmd_launch(args) -> int:
         return 0
     if args.name:
         lf.name = args.name
+    elif args.host:
+        lf.name = f"{lf.name}-{args.host}"  # this machine's share of the graph
     if any(g["name"] == lf.name for g in running_graphs()):
         raise LaunchError(f"a graph named {lf.name!r} is already running; stop it or pass --name")
-    return Launcher(lf, args.file).run(duration_s=args.duration, until_done=args.until_done)
+    return Launcher(lf, args.file, host=args.host).run(duration_s=args.duration, until_done=args.until_done)
 
 
 def cmd_topic(args) -> int:
@@ -91,6 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--duration", type=float, help="stop after this many seconds")
     s.add_argument("--until-done", action="store_true", help="stop when every source has finished")
     s.add_argument("--plan", action="store_true", help="print each process's spec (endpoints, wiring) and exit")
+    s.add_argument("--host", help="run the nodes of this machine (a name in the file's hosts:); without it, the "
+                                  "nodes with no host:")
     s.set_defaults(func=cmd_launch)
 
     s = sub.add_parser("topic", help="inspect topics of a running graph")

@@ -72,7 +72,8 @@ def summary(rows: list[dict]) -> str:
     (against the method's own complete solve) of the thesis's method / the studio options / the fit / the fit of a
     subject calibrated first; and the limb bones' length CV with every marker seen."""
     def mean(take, method, prefix):
-        got = [r["mean_mm"] for r in rows if r["take"] == take and r["method"] == method and r["case"].startswith(prefix)]
+        got = [r["mean_mm"] for r in rows
+               if r["take"] == take and r["method"] == method and r["case"].startswith(prefix)]
         return f"{sum(got) / len(got):.0f}" if got else "-"
 
     def cv(take, method):

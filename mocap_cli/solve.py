@@ -1,8 +1,10 @@
 """`mocap solve`: a recording through the whole chain offline, to a joints CSV and/or a BVH file."""
 from __future__ import annotations
 
+import argparse
 import logging
 import time
+from pathlib import Path
 
 from tqdm import tqdm
 
@@ -12,7 +14,7 @@ from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.landmark_needs import describe_missing, unlocatable
-from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
+from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.warmup import ensure_compiled
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import Status
@@ -76,9 +78,29 @@ def run(args) -> int:
 
 
 def solve_take(args) -> dict:
-    """One take, as the arguments say; returns what it counted (frames, per-status shares, seconds)."""
+    """One take, as the arguments say; returns what it counted (frames, per-status shares, seconds). A take of
+    several actors (labels "actor1:LASI", "actor2:LASI") is solved one actor at a time, each to files of its own
+    (out.csv -> out.actor1.csv, out.actor2.csv)."""
     rec = read_recording(args.file)
     ensure_compiled(log)
+    several = actors(rec.labels)
+    if len(several) < 2:
+        return _solve(args, rec)
+    log.info("%d actors in the take (%s): each solved on their own", len(several), ", ".join(several))
+    counts = [_solve(_for_actor(args, a), rec.actor(a)) for a in several]
+    return {k: sum(c[k] for c in counts) / (1 if k in ("frames", "seconds") else len(counts)) for k in counts[0]}
+
+
+def _for_actor(args, actor: str):
+    """The arguments with each output named for ``actor``, and {actor} in a subject file's path replaced."""
+    def named(path):
+        return str(Path(path).with_suffix(f".{actor}{Path(path).suffix}")) if path else path
+    subject = args.subject.replace("{actor}", actor) if args.subject else args.subject
+    return argparse.Namespace(**{**vars(args), "joints_out": named(args.joints_out), "bvh_out": named(args.bvh_out),
+                                 "subject": subject})
+
+
+def _solve(args, rec) -> dict:
     profile = profile_for(args.profile, rec.labels, log)
     profile.resolve(rec.labels)  # a label the profile names and the take lacks, or several actors: said first
     never = describe_missing(unlocatable(frozenset(profile.landmarks)))

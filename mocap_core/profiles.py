@@ -115,9 +115,9 @@ class Profile(BaseModel):
 def one_actor(labels: list[str]) -> None:
     several = actors(labels)
     if len(several) > 1:
-        raise ProfileError(f"the stream holds {len(several)} actors ({', '.join(several)}), and one skeleton is "
-                           f"solved per stream: record or stream each actor on its own (for a file, export one "
-                           f"subject)")
+        raise ProfileError(f"the stream holds {len(several)} actors ({', '.join(several)}), and this pipeline solves "
+                           f"one: list them in the launch file's actors: (launch/qtm_actors.yaml) for a pipeline "
+                           f"each")
 
 
 def actors(labels: list[str]) -> list[str]:

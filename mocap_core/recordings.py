@@ -39,6 +39,12 @@ class Recording:
         return Recording(self.labels, self.positions[start:stop], self.rate_hz, self.source,
                          self.first_frame + start, self.meta)
 
+    def actor(self, name: str) -> "Recording":
+        """One subject's markers (labels "name:LABEL") of a take of several."""
+        cols = [i for i, x in enumerate(self.labels) if x.rpartition(":")[0].strip() == name]
+        return Recording([self.labels[i] for i in cols], self.positions[:, cols], self.rate_hz,
+                         f"{self.source} ({name})", self.first_frame, self.meta)
+
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 

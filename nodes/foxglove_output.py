@@ -1,6 +1,7 @@
 """Streams the skeleton to the Foxglove app live, through foxglove-sdk's WebSocket server (default
 ws://127.0.0.1:8765; in Foxglove: Open connection > Foxglove WebSocket). Topics and schemas: nodes/foxglove_scene.py
-(``/skeleton`` and ``/markers`` as SceneUpdate for the 3D panel, ``/tf`` as FrameTransforms). At most
+(``/skeleton`` and ``/markers`` as SceneUpdate for the 3D panel, ``/tf`` as FrameTransforms; several actors are
+entities and frames named for them). At most
 ``max_rate_hz`` frames a second (the newest), like the viewer: a display needs no more."""
 from __future__ import annotations
 
@@ -19,6 +20,8 @@ class Params(BaseModel):
     host: str = "127.0.0.1"
     port: int = Field(8765, ge=0, le=65535)
     max_rate_hz: float = Field(60.0, gt=0)
+    actors: list[str] = Field(default_factory=list, description="show each of these actors' skeleton "
+                              "(mocap/<actor>/skeleton/solved); the launch file's actors: sets it")
 
 
 class FoxgloveOutput(Node):
@@ -26,20 +29,27 @@ class FoxgloveOutput(Node):
     Params = Params
     subscribes = {"skeleton/solved": SkeletonFrame, "markers/raw": MarkerFrame}
 
+    @classmethod
+    def inputs(cls, params):
+        if not params.actors:
+            return cls.subscribes
+        return {**{f"mocap/{a}/skeleton/solved": SkeletonFrame for a in params.actors}, "markers/raw": MarkerFrame}
+
     def setup(self) -> None:
         self.context = foxglove.Context()
         self.server = foxglove.start_server(name="mocap", host=self.params.host, port=self.params.port,
                                             context=self.context)
         self.channels = Channels(self.context)
-        self.next = {"skeleton/solved": 0.0, "markers/raw": 0.0}
+        self.next: dict[str, float] = {}  # per topic: when the next frame may go out
         self.log.info("Foxglove WebSocket at ws://%s:%d", self.params.host, self.server.port)
 
     def on_message(self, topic, msg) -> None:
         now = time.monotonic()
-        if now < self.next[topic]:
+        if now < self.next.get(topic, 0.0):
             return
         self.next[topic] = now + 1.0 / self.params.max_rate_hz
-        self.channels.log(msg, msg.header.entry_time_ns or time.time_ns())
+        actor = topic.split("/")[1] if topic.startswith("mocap/") else ""
+        self.channels.log(msg, msg.header.entry_time_ns or time.time_ns(), actor)
 
     def teardown(self) -> None:
         self.server.stop()

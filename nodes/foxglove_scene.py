@@ -50,8 +50,10 @@ def _sphere(p, size: float, colour: Color) -> SpherePrimitive:
                            size=Vector3(x=size, y=size, z=size), color=colour)
 
 
-def skeleton_scene(positions: np.ndarray, status: np.ndarray, up_axis: str, t_ns: int) -> SceneUpdate:
-    """One frame's joints and bones (positions (J, 3) in the source's world; NaN where missing)."""
+def skeleton_scene(positions: np.ndarray, status: np.ndarray, up_axis: str, t_ns: int,
+                   actor: str = "") -> SceneUpdate:
+    """One frame's joints and bones (positions (J, 3) in the source's world; NaN where missing); an actor's
+    skeleton is an entity of its own, named for them."""
     p = positions @ to_z_up(up_axis).T
     seen = np.isfinite(p).all(axis=1) & (status != Status.MISSING)
     spheres = [_sphere(p[j], 0.04, COLOURS.get(Status(int(status[j])), COLOURS[Status.LOCATED]))
@@ -60,7 +62,7 @@ def skeleton_scene(positions: np.ndarray, status: np.ndarray, up_axis: str, t_ns
     lines = [LinePrimitive(type=LinePrimitiveLineType.LineList, pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0),
                                                                            orientation=_IDENTITY),
                            thickness=0.015, scale_invariant=False, points=points, color=BONE_COLOUR)]
-    entity = SceneEntity(timestamp=stamp(t_ns), frame_id=WORLD, id="skeleton", spheres=spheres, lines=lines)
+    entity = SceneEntity(timestamp=stamp(t_ns), frame_id=WORLD, id=actor or "skeleton", spheres=spheres, lines=lines)
     return SceneUpdate(entities=[entity])
 
 
@@ -70,8 +72,9 @@ def marker_scene(positions: np.ndarray, up_axis: str, t_ns: int) -> SceneUpdate:
     return SceneUpdate(entities=[SceneEntity(timestamp=stamp(t_ns), frame_id=WORLD, id="markers", spheres=spheres)])
 
 
-def joint_transforms(positions: np.ndarray, frames: np.ndarray, up_axis: str, t_ns: int) -> FrameTransforms:
-    """Each located joint's bone frame as a child of ``world``."""
+def joint_transforms(positions: np.ndarray, frames: np.ndarray, up_axis: str, t_ns: int,
+                     actor: str = "") -> FrameTransforms:
+    """Each located joint's bone frame as a child of ``world`` (an actor's named ``<actor>/<joint>``)."""
     a = to_z_up(up_axis)
     p = positions @ a.T
     r = a @ frames
@@ -80,8 +83,9 @@ def joint_transforms(positions: np.ndarray, frames: np.ndarray, up_axis: str, t_
     if ok.any():
         q[ok] = Rotation.from_matrix(r[ok]).as_quat()  # (x, y, z, w)
     ts = stamp(t_ns)
+    names = [f"{actor}/{j}" for j in JOINTS] if actor else JOINTS
     return FrameTransforms(transforms=[
-        FrameTransform(timestamp=ts, parent_frame_id=WORLD, child_frame_id=JOINTS[j],
+        FrameTransform(timestamp=ts, parent_frame_id=WORLD, child_frame_id=names[j],
                        translation=Vector3(x=float(p[j, 0]), y=float(p[j, 1]), z=float(p[j, 2])),
                        rotation=Quaternion(x=float(q[j, 0]), y=float(q[j, 1]), z=float(q[j, 2]), w=float(q[j, 3])))
         for j in np.flatnonzero(ok)])
@@ -97,17 +101,17 @@ class Channels:
         self.markers = SceneUpdateChannel("/markers", context=context)
         self.tf = FrameTransformsChannel("/tf", context=context)
 
-    def log(self, msg, t_ns: int) -> int:
-        """A SkeletonFrame (to /skeleton and /tf) or a MarkerFrame (to /markers), stamped ``t_ns``; how many
-        messages went out."""
+    def log(self, msg, t_ns: int, actor: str = "") -> int:
+        """A SkeletonFrame (to /skeleton and /tf; ``actor``'s, in a stream of several) or a MarkerFrame (to
+        /markers), stamped ``t_ns``; how many messages went out."""
         from messages import SkeletonFrame
         from nodes.skeleton_codec import from_message
 
         up = msg.header.up_axis
         if isinstance(msg, SkeletonFrame):
             positions, frames, status = from_message(msg)
-            self.skeleton.log(skeleton_scene(positions, status, up, t_ns), log_time=t_ns)
-            self.tf.log(joint_transforms(positions, frames, up, t_ns), log_time=t_ns)
+            self.skeleton.log(skeleton_scene(positions, status, up, t_ns, actor), log_time=t_ns)
+            self.tf.log(joint_transforms(positions, frames, up, t_ns, actor), log_time=t_ns)
             return 2
         self.markers.log(marker_scene(msg.positions.astype(float), up, t_ns), log_time=t_ns)
         return 1

@@ -36,7 +36,8 @@ class Recorder(Node):
 
     @classmethod
     def inputs(cls, params):
-        return {t: Message for t in params.topics + [f"mocap/{a}/{t}" for a in params.actors for t in params.actor_topics]}
+        per_actor = [f"mocap/{a}/{t}" for a in params.actors for t in params.actor_topics]
+        return {t: Message for t in params.topics + per_actor}
 
     def setup(self) -> None:
         import mcap

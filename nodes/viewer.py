@@ -1,5 +1,6 @@
 """A live web viewer (default http://127.0.0.1:8090): markers, located joints, IK-estimated joints
-in red (as in thesis Figure 4.4), held joints in orange, bones, and a panel of every node's rate,
+in red (as in thesis Figure 4.4), held joints in orange, bones (every actor's, named, in a stream of several),
+and a panel of every node's rate,
 latency and drops from the heartbeats. One self-contained page (canvas, no library, nothing from a
 CDN) that polls ``/state``; ``/events`` streams the same as Server-Sent Events at up to ``max_fps``.
 Drag to orbit, wheel to zoom. On loopback it answers only to 127.0.0.1 and localhost (no DNS rebinding); at
@@ -53,6 +54,8 @@ class Params(BaseModel):
     host: str = "127.0.0.1"
     port: int = Field(8090, ge=0, le=65535)
     max_fps: float = Field(30.0, gt=0)
+    actors: list[str] = Field(default_factory=list, description="show each of these actors' skeleton "
+                              "(mocap/<actor>/skeleton/solved); the launch file's actors: sets it")
 
 
 class Viewer(Node):
@@ -60,8 +63,16 @@ class Viewer(Node):
     Params = Params
     subscribes = {"skeleton/solved": SkeletonFrame, "markers/raw": MarkerFrame, "diagnostics": Heartbeat}
 
+    @classmethod
+    def inputs(cls, params):
+        if not params.actors:
+            return cls.subscribes
+        return {**{f"mocap/{a}/skeleton/solved": SkeletonFrame for a in params.actors},
+                "markers/raw": MarkerFrame, "diagnostics": Heartbeat}
+
     def setup(self) -> None:
-        self.state = {"skeleton": None, "markers": None, "nodes": {}, "frame": -1, "up": DEFAULT_UP}
+        # skeletons: by actor ("" for a stream of one); skeleton: the latest of them
+        self.state = {"skeleton": None, "skeletons": {}, "markers": None, "nodes": {}, "frame": -1, "up": DEFAULT_UP}
         self.version = 0
         self.cond = threading.Condition()
         viewer = self
@@ -129,8 +140,10 @@ class Viewer(Node):
         with self.cond:
             if isinstance(msg, SkeletonFrame):
                 pos = np.where(np.isfinite(msg.positions), msg.positions, np.nan)
-                self.state["skeleton"] = {"positions": [None if np.isnan(p).any() else [round(float(v), 4) for v in p]
-                                                        for p in pos], "status": msg.status.tolist()}
+                skeleton = {"positions": [None if np.isnan(p).any() else [round(float(v), 4) for v in p] for p in pos],
+                            "status": msg.status.tolist()}
+                actor = topic.split("/")[1] if topic.startswith("mocap/") else ""
+                self.state["skeleton"] = self.state["skeletons"][actor] = skeleton
                 self.state["frame"] = msg.header.frame
                 self.state["up"] = msg.header.up_axis or self.state["up"]
             elif isinstance(msg, MarkerFrame):

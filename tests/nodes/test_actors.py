@@ -1,7 +1,9 @@
 """Several actors in one stream: the source splits it by the labels' subject, the launcher runs one pipeline per
 actor, and each actor's skeleton is what solving that actor alone gives."""
+import json
 import logging
 import time
+import urllib.request
 
 import numpy as np
 import pytest
@@ -118,10 +120,15 @@ def test_two_actors_from_qtm_each_solve_as_if_alone(tmp_path):
         f"  - id: rec\n    kind: recorder\n    params: {{path: {bag}, topics: [markers/raw], "
         f"actor_topics: [skeleton/solved]}}\n")
     with emulator(tmp_path, file=take) as (_, port):
-        with launched(tmp_path, text, "--set", f"qtm.port={port}", "--set", f"vmc.port={free_port()}") as g:
+        viewer = free_port()
+        with launched(tmp_path, text, "--set", f"qtm.port={port}", "--set", f"vmc.port={free_port()}",
+                      "--set", f"viewer.port={viewer}", "--set", "foxglove.port=0") as g:
             wait_for(lambda: " ready in " in g.log() or g.proc.poll() is not None, 120, "the graph")
             assert g.proc.poll() is None, g.log()
-            time.sleep(two.n_frames / two.rate_hz + 2)
+            time.sleep(4)
+            state = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{viewer}/state").read())
+            assert set(state["skeletons"]) == {"actor1", "actor2"}   # the viewer shows everyone
+            time.sleep(two.n_frames / two.rate_hz)
     raw, solved = {}, {}
     for m in read_bag(bag):
         msg = decode(m.data, m.topic)
@@ -141,3 +148,41 @@ def test_two_actors_from_qtm_each_solve_as_if_alone(tmp_path):
         got = np.stack([solved[actor][f] for f in frames])
         assert np.array_equal(np.isnan(got), np.isnan(want)), actor
         assert np.nanmax(np.abs(got - want)) <= 0.001, (actor, np.nanmax(np.abs(got - want)))
+
+
+@pytest.mark.timeout(300)
+def test_actors_on_two_machines_over_curve(tmp_path):
+    """One launch file, two launchers: actor1's pipeline on the machine named rack (127.0.0.2 stands in for it), the
+    source, the recorder and actor2's pipeline on the one launched without --host; tcp with CURVE between them."""
+    from nodes import curve
+    from tests.nodes.test_security import free_base_port
+
+    take = tmp_path / "two.c3d"
+    two = crowd(read_recording(data_file(KARATE)).slice(0, 360), ["actor1", "actor2"])
+    write_c3d(two, take)
+    bag = tmp_path / "spread.mcap"
+    text = f"""
+transport: {{kind: tcp, base_port: {free_base_port()}, curve_keys: {curve.generate(tmp_path / "keys")}}}
+hosts: {{rack: 127.0.0.2}}
+actors: {{actor1: {{host: rack}}, actor2: {{}}}}
+nodes:
+  - {{id: source, kind: file_source, params: {{path: {take}}}}}
+  - {{id: hips, kind: hip_interpolation, per_actor: true}}
+  - {{id: localize, kind: joint_localization, per_actor: true}}
+  - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [], actor_topics: [skeleton/localized]}}}}
+"""
+    with launched(tmp_path, text, "--host", "rack", name="rack") as rack:
+        wait_for(lambda: len(rack.registry().get("nodes", [])) == 2 if rack.registry_file.exists() else False, 60,
+                 "the rack's nodes")
+        assert {n["id"] for n in rack.registry()["nodes"]} == {"hips-actor1", "localize-actor1"}
+        assert all(n["endpoint"].startswith("tcp://127.0.0.2:") for n in rack.registry()["nodes"])
+        with launched(tmp_path, text, "--until-done", name="stage") as stage:
+            stage.proc.wait(timeout=120)
+            assert stage.proc.returncode == 0, stage.log()
+    got = {}
+    for m in read_bag(bag):
+        msg = decode(m.data, m.topic)
+        got.setdefault(m.topic.split("/")[1], {})[msg.header.frame] = np.asarray(msg.positions)
+    assert len(got["actor1"]) == len(got["actor2"]) == two.n_frames      # every frame, from both machines
+    diff = np.stack([got["actor2"][f] - got["actor1"][f] for f in got["actor1"]])
+    assert np.nanmax(np.abs(diff - [3, 0, 0])) < 1e-5
