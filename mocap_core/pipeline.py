@@ -12,7 +12,8 @@ from typing import Iterator
 import numpy as np
 
 from mocap_core.blend import DEFAULT_FRAME_S
-from mocap_core.gapfill import BEYOND_THESIS, GapFiller
+from mocap_core.gapfill import GapFiller
+from mocap_core.presets import PRESETS
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
@@ -45,16 +46,20 @@ class SkeletonPipeline:
         from the pose memory, bony pairs whose spacing jumped dropped, swivel, segment carry, the blends
         at loss and re-acquisition). ``rate_hz``:
         the take's frame rate, which paces the blends (else blend.DEFAULT_FRAME_S a frame).
-        ``fill_options``: the gap filler's options instead of ``beyond``'s (gapfill.BEYOND_THESIS)."""
+        ``beyond`` is the ``studio`` preset (mocap_core.presets), as the nodes' ``preset: studio``; ``fill_options``:
+        the gap filler's options instead of the preset's."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
         self.landmark_map = profile.resolve(labels)
         self.gate = MarkerGate()
-        self.hips = HipInterpolator(when_lost="fit" if beyond else "hold")
-        on = beyond and fill_gaps  # the landmark fills are gap fills
-        self.fills = LandmarkFills(on, on, self.landmark_map.tracking_of, self.landmark_map.present(),
-                                   self.landmark_map, pair_guard=on)
+        preset = PRESETS["studio" if beyond else "thesis"]
+        hips = {"when_lost": "hold", "rebuild": False, "pose_memory": False, "pair_guard": False, **preset["hips"]}
+        self.hips = HipInterpolator(when_lost=hips["when_lost"])
+        # the landmark fills are gap fills
+        self.fills = LandmarkFills(hips["rebuild"] and fill_gaps, hips["pose_memory"] and fill_gaps,
+                                   self.landmark_map.tracking_of, self.landmark_map.present(), self.landmark_map,
+                                   pair_guard=hips["pair_guard"] and fill_gaps)
         self.localizer = Localizer(profile.body)
-        options = fill_options if fill_options is not None else BEYOND_THESIS if beyond else {}
+        options = fill_options if fill_options is not None else preset["ik"]
         self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
 
     def landmarks(self, markers: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ pair whose spacing jumped, mocap_core.pair_guard).
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
@@ -21,6 +21,7 @@ from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.marker_gate import MarkerGate
 from mocap_core.pair_guard import PAIR_GUARD_HELP
 from mocap_core.pose_memory import POSE_MEMORY_HELP
+from mocap_core.presets import PRESET_HELP, Preset, with_preset
 from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
 from mocap_core.segment_rebuild import REBUILD_HELP
@@ -32,11 +33,17 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     profile: str = Field(AUTO, description="marker-set profile name (profiles/) or YAML path; auto: the shipped "
                                            "one the stream's labels fit")
+    preset: Preset = Field("thesis", description=PRESET_HELP)
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
     when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
     rebuild: bool = Field(False, description=REBUILD_HELP)
     pose_memory: bool = Field(False, description=POSE_MEMORY_HELP)
     pair_guard: bool = Field(False, description=PAIR_GUARD_HELP)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _preset(cls, values):
+        return with_preset("hips", values)
 
 
 class HipInterpolation(Node):

@@ -9,13 +9,14 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from messages import LimbSolution, SkeletonFrame
 from mocap_core.gapfill import BEYOND_THESIS_HELP, LIMB_CHAINS, LimbFiller
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
+from mocap_core.presets import PRESET_HELP, Preset, with_preset
 from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
@@ -24,6 +25,7 @@ from nodes.skeleton_codec import from_message, to_message
 class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     limb: Literal["torso", "left_arm", "right_arm", "left_leg", "right_leg"]
+    preset: Preset = Field("thesis", description=PRESET_HELP)
     solver: str = Field("ccd", description=f"one of {', '.join(SOLVERS)}")
     constraints: bool = True
     constraints_file: str | None = None
@@ -38,6 +40,11 @@ class Params(BaseModel):
     reacquire_step_m: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["reacquire_step_m"])
     blend_half_life_s: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["blend_half_life_s"])
     blend_course: bool = Field(True, description=BEYOND_THESIS_HELP["blend_course"])
+
+    @model_validator(mode="before")
+    @classmethod
+    def _preset(cls, values):
+        return with_preset("ik", values)
 
 
 class IkGapfill(Node):

@@ -91,3 +91,17 @@ def test_a_node_that_cannot_start_stops_the_launch_with_one_line(tmp_path, overr
     assert f"node {node} could not start: {says}" in line and f"--set {node}.PARAM=VALUE" in line
     assert "Traceback" not in r.stderr and "restart" not in r.stderr
     assert time.monotonic() - t < 60
+
+
+def test_preset_studio_is_the_gap_filling_beyond_the_thesis_and_a_param_beside_it_wins():
+    from mocap_core.gapfill import BEYOND_THESIS
+    from nodes.hip_interpolation import Params as HipParams
+    from nodes.ik_gapfill import Params as IkParams
+
+    ik = IkParams.model_validate({"limb": "left_arm", "preset": "studio", "swivel": False})
+    assert {k: getattr(ik, k) for k in BEYOND_THESIS} == {**BEYOND_THESIS, "swivel": False}
+    assert IkParams.model_validate({"limb": "torso"}).swivel is False          # the thesis's method by default
+    hips = HipParams.model_validate({"preset": "studio"})
+    assert (hips.when_lost, hips.rebuild, hips.pose_memory, hips.pair_guard) == ("fit", True, True, True)
+    with pytest.raises(ValueError, match="preset"):
+        IkParams.model_validate({"limb": "torso", "preset": "fast"})
