@@ -30,8 +30,8 @@ from mocap_core.recordings import crowd, read_recording, write_c3d  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
 # Median latency over the run's last third this many times its first third: the queues grow, the machine is not
-# keeping up (a short run shows no drops yet; a long one would).
-FALLING_BEHIND = 2.0
+# keeping up (a short run shows no drops yet; a long one would). Runs that keep up stay within 0.8-1.05.
+FALLING_BEHIND = 1.25
 
 
 def run(actors: int, layout: str, seconds: float, rate: float, work: Path) -> dict:
@@ -85,8 +85,9 @@ def main() -> int:
     print(f"QTM emulator at {args.rate:.0f} Hz, {args.seconds:.0f} s a run; latency ms of the worst actor")
     print("| layout | actors | p50 | p99 | p50 / 1 actor | p99 / 1 actor | latency end / start | dropped | missing |")
     print("|---|---|---|---|---|---|---|---|---|")
+    kept = {}
     for layout in args.layouts.split(","):
-        base = None
+        base, kept[layout] = None, 0
         for n in range(1, args.max_actors + 1):
             r = run(n, layout, args.seconds, args.rate, work)
             base = base or r
@@ -94,6 +95,10 @@ def main() -> int:
                   f"{r['p99'] / base['p99']:.2f} | {r['growth']:.2f} | {r['dropped']} | {r['missing']} |", flush=True)
             if r["dropped"] or r["missing"] or r["growth"] > FALLING_BEHIND:
                 break
+            kept[layout] = n
+    for layout, n in kept.items():
+        print(f"{layout}: {n} actors at {args.rate:.0f} Hz with 0 dropped, 0 missing and a steady latency"
+              + (" (the most tried)" if n == args.max_actors else ""))
     return 0
 
 
