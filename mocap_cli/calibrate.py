@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import numpy as np
 
 from mocap_core.fit.calibration import calibrate
-from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
+from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.warmup import ensure_compiled
 from mocap_core.recordings import read_recording
 from mocap_core.skeleton import JOINTS
@@ -32,17 +33,27 @@ def run(args) -> int:
     ensure_compiled(log)
     if args.seconds:
         rec = rec.slice(0, max(1, int(args.seconds * rec.rate_hz)))
-    profile = profile_for(args.profile, rec.labels, log)
+    several = actors(rec.labels)
+    if len(several) < 2:
+        _calibrate(rec, args.profile, args.out)
+        return 0
+    log.info("%d actors in the take (%s): a subject file each", len(several), ", ".join(several))
+    for actor in several:  # actor.yaml -> actor.alice.yaml: `mocap solve --subject 'actor.{actor}.yaml'` reads them
+        _calibrate(rec.actor(actor), args.profile, str(Path(args.out).with_suffix(f".{actor}{Path(args.out).suffix}")))
+    return 0
+
+
+def _calibrate(rec, profile_name: str, out: str) -> None:
+    profile = profile_for(profile_name, rec.labels, log)
     subject = calibrate(rec.positions, rec.labels, profile, rec.rate_hz)
-    subject.save(args.out)
+    subject.save(out)
     lengths = subject.lengths()
     named = [f"{j} {lengths[i] * 1000:.0f}" for i, j in enumerate(JOINTS) if subject.known[i] and i > 0]
     unassigned = [x for x, b in zip(subject.labels, subject.marker_bone) if b < 0]
     log.info("%s: %d frames, %d of %d markers on a bone (median stray %.1f mm)%s; bones (mm): %s",
-             args.out, subject.frames, int((subject.marker_bone >= 0).sum()), len(subject.labels),
+             out, subject.frames, int((subject.marker_bone >= 0).sum()), len(subject.labels),
              float(np.nanmedian(subject.spread_m) * 1000),
              f", on none: {', '.join(unassigned)}" if unassigned else "", ", ".join(named))
     missing = [j for i, j in enumerate(JOINTS) if not subject.known[i]]
     if missing:
         log.warning("never located, so not solved: %s (the profile lacks their landmarks)", ", ".join(missing))
-    return 0
