@@ -23,4 +23,7 @@ def test_eval_rigid_reports_the_three_methods_on_a_real_take(tmp_path):
         assert float(by[case, "fit_subject"]["bone_cv_pct"]) < 1e-9
     # the worst case: only the pelvis, head, hand and toe markers from 1 s; the rigid fit is nearer
     assert float(by["worst", "fit"]["mean_mm"]) < float(by["worst", "thesis"]["mean_mm"])
-    assert "| qualisys_walk | fit |" in (tmp_path / "rigid.md").read_text()
+    text = (tmp_path / "rigid.md").read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| qualisys_walk | "))   # the summary
+    assert [len(cell.split(" / ")) for cell in row.split(" | ")[1:]] == [4, 4, 4, 3]
+    assert "| qualisys_walk | elbow_l | fit_subject |" in text

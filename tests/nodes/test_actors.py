@@ -121,8 +121,10 @@ def test_two_actors_from_qtm_each_solve_as_if_alone(tmp_path):
         f"actor_topics: [skeleton/solved]}}\n")
     with emulator(tmp_path, file=take) as (_, port):
         viewer = free_port()
+        # retarget waits for every limb (on a busy machine a late limb is otherwise held, as live output should)
         with launched(tmp_path, text, "--set", f"qtm.port={port}", "--set", f"vmc.port={free_port()}",
-                      "--set", f"viewer.port={viewer}", "--set", "foxglove.port=0") as g:
+                      "--set", f"viewer.port={viewer}", "--set", "foxglove.port=0",
+                      "--set", "retarget.max_wait_ms=5000") as g:
             wait_for(lambda: " ready in " in g.log() or g.proc.poll() is not None, 120, "the graph")
             assert g.proc.poll() is None, g.log()
             time.sleep(4)
