@@ -231,8 +231,8 @@ class LimbFiller:
             self.end_local[:] = self.prev_parent_frame.T @ (self.prev_pos[k] - self.prev_pos[root])
             self.end_since = 0.0
         self.end_since += self.blend.frame_s  # (seconds into the gap)
-        if self.end_since < END_WAIT_S:
-            return 0
+        if self.end_since < END_WAIT_S - self.blend.frame_s / 2:  # to the nearest frame: stamps are rounded (QTM's
+            return 0                                               # to the microsecond), sums of 1/rate inexact
         held = positions[idx[root]] + parent @ self.end_local
         if all_finite(held):  # a pose unlike those learned moves the end less far from where it was held
             point = held + weight * (point - held)

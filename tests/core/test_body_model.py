@@ -275,3 +275,21 @@ def test_a_nan_flood_leaves_the_end_model_working():
     assert learned[149] == learned[129] and np.isfinite(filler.end_model.sxx).all()
     late = hidden & (np.arange(len(pos)) > 200) & ((np.arange(len(pos)) - 60) % 120 >= 12)
     assert (status[late, INDEX["wrist_l"]] == Status.ESTIMATED).all() and np.isfinite(pos[hidden]).all()
+
+
+def test_the_end_model_waits_as_long_with_qtm_stamps_as_with_exact_ones():
+    """QTM stamps frames to the microsecond, so at 120 Hz the steps are 8333 and 8334 us, not 1/120 s: the end model's
+    wait must end on the same frame either way (it ended a frame apart: 6.5 mm off for 30 frames of a live solve)."""
+    rec = read_recording(data_file("08_cmu_135_02_karate_kata.c3d")).slice(337, 1440)
+    markers = rec.positions.astype(np.float64)
+    markers[900 - 337:1020 - 337] = np.nan   # the actor walks out for a second
+
+    def solve(stamp):
+        pipe = SkeletonPipeline(load_profile("cmu41"), rec.labels, beyond=True, rate_hz=rec.rate_hz)
+        fill = pipe.filler.fill
+        pipe.filler.fill = lambda p, fr, st, t: fill(p, fr, st, stamp(t))
+        return np.concatenate([c.positions for c in pipe.run(markers)])
+
+    exact = solve(lambda t: t)
+    qtm = solve(lambda t: round((337 + round(t * rec.rate_hz)) / rec.rate_hz * 1e6) / 1e6)
+    assert np.nanmax(np.abs(qtm - exact)) < 1e-4
