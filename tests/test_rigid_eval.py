@@ -1,4 +1,4 @@
-"""`mocap eval rigid` on a real take: the three methods side by side, written as a report."""
+"""`mocap eval rigid` on a real take: the methods side by side, written as a report."""
 import csv
 import subprocess
 import sys

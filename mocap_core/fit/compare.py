@@ -1,7 +1,7 @@
 """The thesis's method, the studio options and the fit side by side on one take (``mocap eval rigid``).
 
 Each case hides markers (by label, so every method sees the same input) from a time on, solves the take
-three ways and measures the hidden joints against the localization of the complete take; with nothing
+each way and measures the hidden joints against each way's solve of the complete take; with nothing
 hidden it measures how much the bones' lengths wander. The fit calibrates from the same hidden take, as
 ``mocap solve --fit`` does; ``fit_subject`` is the studio's order, the subject calibrated first with every
 marker seen (here: from the complete take, standing in for a range-of-motion take) and then fitted to the
