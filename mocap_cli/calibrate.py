@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 import numpy as np
 
+from mocap_cli.solve import actor_path
 from mocap_core.fit.calibration import calibrate
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.warmup import ensure_compiled
@@ -39,7 +39,7 @@ def run(args) -> int:
         return 0
     log.info("%d actors in the take (%s): a subject file each", len(several), ", ".join(several))
     for actor in several:  # actor.yaml -> actor.alice.yaml: `mocap solve --subject 'actor.{actor}.yaml'` reads them
-        _calibrate(rec.actor(actor), args.profile, str(Path(args.out).with_suffix(f".{actor}{Path(args.out).suffix}")))
+        _calibrate(rec.actor(actor), args.profile, actor_path(args.out, actor))
     return 0
 
 

@@ -91,13 +91,16 @@ def solve_take(args) -> dict:
     return {k: sum(c[k] for c in counts) / (1 if k in ("frames", "seconds") else len(counts)) for k in counts[0]}
 
 
+def actor_path(path: str | None, actor: str) -> str | None:
+    """An output named for one actor of a take of several: out.csv -> out.actor1.csv."""
+    return str(Path(path).with_suffix(f".{actor}{Path(path).suffix}")) if path else path
+
+
 def _for_actor(args, actor: str):
     """The arguments with each output named for ``actor``, and {actor} in a subject file's path replaced."""
-    def named(path):
-        return str(Path(path).with_suffix(f".{actor}{Path(path).suffix}")) if path else path
     subject = args.subject.replace("{actor}", actor) if args.subject else args.subject
-    return argparse.Namespace(**{**vars(args), "joints_out": named(args.joints_out), "bvh_out": named(args.bvh_out),
-                                 "subject": subject})
+    return argparse.Namespace(**{**vars(args), "joints_out": actor_path(args.joints_out, actor),
+                                 "bvh_out": actor_path(args.bvh_out, actor), "subject": subject})
 
 
 def _solve(args, rec) -> dict:

@@ -125,14 +125,19 @@ def actors(labels: list[str]) -> list[str]:
     by_prefix: dict[str, set[str]] = {}
     for label in labels:
         if ":" in label:
-            prefix, name = label.rsplit(":", 1)
-            by_prefix.setdefault(prefix.strip(), set()).add(name.strip())
+            by_prefix.setdefault(actor_of(label), set()).add(strip_prefix(label))
     shared = [p for p in by_prefix if any(len(by_prefix[p] & by_prefix[q]) >= 3 for q in by_prefix if q != p)]
     return sorted(shared)
 
 
 def strip_prefix(label: str) -> str:
     return label.rsplit(":", 1)[-1].strip()
+
+
+def actor_of(label: str) -> str:
+    """The subject a label belongs to ("actor1:LASI" -> "actor1"; "" without a prefix)."""
+    prefix, sep, _ = label.rpartition(":")
+    return prefix.strip() if sep else ""
 
 
 def parse_expression(expr: str, where: str) -> list[str]:

@@ -41,7 +41,9 @@ class Recording:
 
     def actor(self, name: str) -> "Recording":
         """One subject's markers (labels "name:LABEL") of a take of several."""
-        cols = [i for i, x in enumerate(self.labels) if x.rpartition(":")[0].strip() == name]
+        from mocap_core.profiles import actor_of
+
+        cols = [i for i, x in enumerate(self.labels) if actor_of(x) == name]
         return Recording([self.labels[i] for i in cols], self.positions[:, cols], self.rate_hz,
                          f"{self.source} ({name})", self.first_frame, self.meta)
 
@@ -173,7 +175,9 @@ def write_c3d(rec: Recording, path: str | Path) -> None:
 def crowd(rec: Recording, actors: list[str], spacing_m: float = 3.0) -> Recording:
     """A take of several actors, each ``rec`` moved ``spacing_m`` further along x and named ``actor:LABEL``, as
     QTM and Vicon stream several labelled subjects."""
-    names = [label.rsplit(":", 1)[-1] for label in rec.labels]
+    from mocap_core.profiles import strip_prefix
+
+    names = [strip_prefix(label) for label in rec.labels]
     shift = np.zeros(3, np.float32)
     parts = []
     for i, _ in enumerate(actors):

@@ -12,21 +12,24 @@ import logging
 
 import numpy as np
 
-from messages import MarkerFrame, MarkerSet, Message
-
-SEPARATOR = ":"
-
-
-def actor_of(label: str) -> str:
-    """The subject a label belongs to ("actor1:LASI" -> "actor1"; "" without a prefix)."""
-    prefix, sep, _ = label.rpartition(SEPARATOR)
-    return prefix.strip() if sep else ""
+from messages import MarkerFrame, MarkerSet, Message, SkeletonFrame
+from mocap_core.profiles import actor_of
 
 
 def actor_topics(actors: list[str]) -> dict[str, type[Message]]:
     """The topics a source splitting for ``actors`` writes besides the whole stream's."""
     return {f"mocap/{a}/{t}": kind for a in actors for t, kind in (("markers/raw", MarkerFrame),
                                                                     ("markers/set", MarkerSet))}
+
+
+def skeletons_of(actors: list[str]) -> dict[str, type[Message]]:
+    """What an output that shows everyone reads: each actor's ``skeleton/solved``."""
+    return {f"mocap/{a}/skeleton/solved": SkeletonFrame for a in actors}
+
+
+def actor_in(topic: str) -> str:
+    """The actor whose topic this is ("mocap/alice/skeleton/solved" -> "alice"; "" for a stream of one)."""
+    return topic.split("/")[1] if topic.startswith("mocap/") else ""
 
 
 class ActorSplit:
@@ -58,8 +61,8 @@ class ActorSplit:
         self.log.info("actors in the stream: %s", ", ".join(f"{a} ({len(c)} markers)" for a, c in
                                                             self.columns.items()) or "none of those listed")
         if absent:
-            self.log.warning("no markers of %s in the stream (labels 'NAME%sMARKER'); their pipeline waits for them",
-                             ", ".join(absent), SEPARATOR)
+            self.log.warning("no markers of %s in the stream (labels 'NAME:MARKER'); their pipeline waits for them",
+                             ", ".join(absent))
         if others:
             self.log.warning("the stream also holds %s, which the launch file's actors: does not list (not solved)",
                              ", ".join(others))

@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from messages import MarkerFrame, SkeletonFrame
 from nodes.foxglove_scene import Channels
+from nodes.actor_split import actor_in, skeletons_of
 from nodes.runtime import Node
 
 
@@ -33,7 +34,7 @@ class FoxgloveOutput(Node):
     def inputs(cls, params):
         if not params.actors:
             return cls.subscribes
-        return {**{f"mocap/{a}/skeleton/solved": SkeletonFrame for a in params.actors}, "markers/raw": MarkerFrame}
+        return {**skeletons_of(params.actors), "markers/raw": MarkerFrame}
 
     def setup(self) -> None:
         self.context = foxglove.Context()
@@ -48,7 +49,7 @@ class FoxgloveOutput(Node):
         if now < self.next.get(topic, 0.0):
             return
         self.next[topic] = now + 1.0 / self.params.max_rate_hz
-        actor = topic.split("/")[1] if topic.startswith("mocap/") else ""
+        actor = actor_in(topic)
         self.channels.log(msg, msg.header.entry_time_ns or time.time_ns(), actor)
 
     def teardown(self) -> None:

@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import Heartbeat, MarkerFrame, SkeletonFrame
 from mocap_core.skeleton import JOINTS, PARENT_INDEX
 from mocap_core.world import DEFAULT_UP, to_canonical
+from nodes.actor_split import actor_in, skeletons_of
 from nodes.runtime import Node
 
 PAGE = Path(__file__).with_name("viewer.html")
@@ -67,7 +68,7 @@ class Viewer(Node):
     def inputs(cls, params):
         if not params.actors:
             return cls.subscribes
-        return {**{f"mocap/{a}/skeleton/solved": SkeletonFrame for a in params.actors},
+        return {**skeletons_of(params.actors),
                 "markers/raw": MarkerFrame, "diagnostics": Heartbeat}
 
     def setup(self) -> None:
@@ -142,7 +143,7 @@ class Viewer(Node):
                 pos = np.where(np.isfinite(msg.positions), msg.positions, np.nan)
                 skeleton = {"positions": [None if np.isnan(p).any() else [round(float(v), 4) for v in p] for p in pos],
                             "status": msg.status.tolist()}
-                actor = topic.split("/")[1] if topic.startswith("mocap/") else ""
+                actor = actor_in(topic)
                 self.state["skeleton"] = self.state["skeletons"][actor] = skeleton
                 self.state["frame"] = msg.header.frame
                 self.state["up"] = msg.header.up_axis or self.state["up"]
