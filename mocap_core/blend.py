@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from mocap_core.frame_clock import next_frame_s
 from mocap_core.analytic_fill import (ESTIMATED, HELD, LOCATED, MISSING, all_finite, nearest_on_circle,
                                      nearest_on_sphere)
 from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vnorm
@@ -101,12 +102,8 @@ class BlendState:
         return self.step > 0 or self.omega > 0
 
     def advance_clock(self, time_s: float) -> None:
-        """The time since the last frame; a missing, repeated or backward stamp (a looping file, a
-        restarted QTM) or one over a second keeps the last good interval."""
-        step = time_s - self.last_time_s
-        if 0 < step <= 1.0:
-            self.frame_s = step
-        self.last_time_s = time_s
+        """The time since the last frame (frame_clock.next_frame_s)."""
+        self.frame_s, self.last_time_s = next_frame_s(self.frame_s, self.last_time_s, time_s), time_s
 
     def blend(self, positions, status, idx, frames=None) -> None:
         """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone

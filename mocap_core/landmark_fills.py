@@ -45,7 +45,7 @@ class LandmarkFills:
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking, time_s)
         if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
-            filled |= self.leg_hinge.fill(landmarks, tracking, filled)
+            filled |= self.leg_hinge.fill(landmarks, tracking, filled, time_s)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
             recalled = self.memory.fill(landmarks, filled, tracking, time_s)
             filled = recalled if filled is None else filled | recalled
@@ -68,7 +68,8 @@ class LandmarkFills:
             landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking, times_s)
         if self.leg_hinge is not None:
             for f in range(len(landmarks)):
-                filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f], filled[f])
+                filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f], filled[f],
+                                                 np.nan if times_s is None else times_s[f])
         if self.memory is not None:
             landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking, times_s)
             filled = recalled if filled is None else filled | recalled

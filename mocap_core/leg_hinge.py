@@ -34,6 +34,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from mocap_core.frame_clock import FrameClock
 from mocap_core.ik.kernels import (axis_angle, best_roll, follow, mm, mv, rigid_fit_first, rotation_between,
                                    vfinite, vnorm)
 from mocap_core.localization import hip_centres
@@ -46,11 +47,10 @@ KNEE_ANKLE = ("FLE", "FME", "FAL", "TAM")
 MAX_BEND_STEP = np.radians(30.0)  # the knee's bend searched this far either side of the last frame's
 SEARCH_STEP = np.radians(1.0)     # first in these steps, then in tenths of them about the best
 BEND_PRICE_M = 0.001              # per radian away from the last bend: settles near-ties between two bends
-# A shank marker lost goes on at its last step for this many frames, and the leg with it (the "velocity
-# over short gaps"); after that the ankle, where it is seen or rebuilt, takes its place, and
-# else the leg is left to the IK stage. Held still instead, a kicking leg falls far behind; carried on for long,
-# it overshoots.
-COURSE_FRAMES = 6
+# A shank marker lost goes on at its last step for this long, and the leg with it (the "velocity over short
+# gaps"); after that the ankle, where it is seen or rebuilt, takes its place, and else the leg is left to the IK
+# stage. Held still instead, a kicking leg falls far behind; carried on for long, it overshoots.
+COURSE_S = 0.05
 # The knee's roll about the shank marker-ankle line is searched this far either side of the rebuild's, in
 # ROLL_STEP steps, then in tenths and hundredths of them (0.05 deg: 0.05 mm at the epicondyles). ROLL_PRICE
 # (square metres per square radian) holds it near the rebuild's where the distances hardly fix it: their own
@@ -81,12 +81,14 @@ class LegHinge:
         self.bend = np.zeros(2)                        # and the knee's bend since then (radians)
         self.course = np.full((2, 2, 3), np.nan)       # the shank marker's last position and step
         self.lost_frames = np.zeros(2, np.int64)       # and for how many frames it has been lost
+        self.clock = FrameClock(1 / 120)               # (the frames' interval, from their times)
         self.active = bool((self.legs[:, -1] >= 0).any())  # False: no shank marker, nothing to fill from
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None,
-             rebuilt: np.ndarray | None = None) -> np.ndarray:
+             rebuilt: np.ndarray | None = None, time_s: float = np.nan) -> np.ndarray:
         """One frame of landmarks (n_landmarks, 3), NaN = lost, and the tracking markers (n_tracking, 3);
-        ``rebuilt``: the mask of the landmarks the segment rebuild put this frame (their roll is settled).
+        ``rebuilt``: the mask of the landmarks the segment rebuild put this frame (their roll is settled);
+        ``time_s``: the frame's time (the course's length is in seconds).
         Fills in place; returns the mask of the landmarks filled."""
         out = np.zeros(len(landmarks), np.bool_)
         if tracking is None or not self.active:
@@ -96,8 +98,9 @@ class LegHinge:
         if rebuilt is None:
             rebuilt = np.zeros(len(landmarks), np.bool_)
         tracking = np.asarray(tracking, np.float64)
+        self.clock.advance(float(time_s))
         fill_frame(landmarks, tracking, rebuilt, self.legs, self.shank_markers, self.shape, self.turn, self.bend,
-                   self.course, self.lost_frames, self.hip_distance, self.roll_price, out)
+                   self.course, self.lost_frames, self.clock.frames(COURSE_S), self.hip_distance, self.roll_price, out)
         return out
 
 
@@ -138,8 +141,8 @@ def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price,
 
 
 @njit(cache=True)
-def fill_frame(lm, tracking, rebuilt, legs, shank_markers, shape, turn, bend, course, lost_frames, hip_distance,
-               roll_price, out):
+def fill_frame(lm, tracking, rebuilt, legs, shank_markers, shape, turn, bend, course, lost_frames, course_frames,
+               hip_distance, roll_price, out):
     pelvis, left_hip, right_hip = hip_centres(lm)
     settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, roll_price, left_hip, right_hip)
     now = np.empty((6, 3))
@@ -154,7 +157,7 @@ def fill_frame(lm, tracking, rebuilt, legs, shank_markers, shape, turn, bend, co
             now[FLE + i] = lm[legs[leg, i]]
         now[MARKER] = course[leg, 0]
         point = MARKER
-        if not (seen or lost_frames[leg] <= COURSE_FRAMES):
+        if not (seen or lost_frames[leg] <= course_frames):
             if not (vfinite(now[FAL]) and vfinite(shape[leg, FAL])):
                 continue
             point = FAL

@@ -45,6 +45,7 @@ from typing import Iterable, Sequence
 import numpy as np
 from numba import njit
 
+from mocap_core.frame_clock import FrameClock
 from mocap_core.ik.kernels import follow, mm, mtv, mv, rotation_between, rotation_vector, turned_by, vfinite, vnorm
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
@@ -83,10 +84,9 @@ PELVIS_RESET_RAD = 0.35  # 20 deg away from where the tracker expected it
 # place (the ankle better on all eight dance-set legs; turning the knee's offset too made the knees worse).
 FOOT_WIDTH_TOLERANCE = 0.2  # the toe markers' spacing off its learned value by more than this share: not used
 FOOT_WIDTH_RATE = 1 / 100   # how fast the learned spacing follows the frames where the leg is seen whole
-# ... and used only once the spacing has held for this many frames (1/3 s at 60 Hz): dance1's left toe markers,
-# which come apart from 6 s to 14 s, are right again for 3 frames at 6.05 s, and turning the ankle with them
-# there took its move at a return 0.1 s later to 2.11x its normal step (1.47x with 20 frames).
-FOOT_SOUND_FRAMES = 20
+# ... and used only once the spacing has held this long (toe markers that come apart can be right again for a few
+# frames; turning the ankle with them then makes it jump at a return)
+FOOT_SOUND_S = 1 / 3
 # A walking toe passes each place twice a step, forward in the swing and back (in the pelvis's frame) in the
 # stance, with the knee bent differently each time. A second search finds the poses by the toe's place and
 # VELOCITY_S times its velocity (where it will be VELOCITY_S from now), and each target is the two searches'
@@ -152,6 +152,7 @@ class PoseMemory:
         self.estimate = np.full((n, width, 3), np.nan)       # the smoothed targets during a gap (NaN: none)
         self.foot_width = np.full(n, np.nan)                 # the learned spacing of the foot's toe markers
         self.foot_sound = np.zeros(n, np.int64)              # and for how many frames it has held
+        self.clock = FrameClock(1 / 60)                      # (the frames' interval, from their times)
         self.reach = np.zeros(n)                             # the farthest its ankle has been from its hip
         self.toe_motion = np.full((n, 3, 3), np.nan)         # per leg: the last toe (pelvis frame), its velocity,
         self.toe_motion[:, 1] = 0.0                          # and [2, 0] its time (no velocity yet: zero)
@@ -178,9 +179,11 @@ class PoseMemory:
         else:
             tracking, foot = np.asarray(tracking, np.float64), self.foot
         if len(self.legs):
+            self.clock.advance(float(time_s))
             fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.keys, self.offsets, self.state,
                        self.last_kept, self.last_seen, self.estimate, out, self.pelvis_axes, self.pelvis_motion,
-                       tracking, foot, self.foot_width, self.foot_sound, self.reach, self.toe_motion, float(time_s))
+                       tracking, foot, self.foot_width, self.foot_sound, self.clock.frames(FOOT_SOUND_S), self.reach,
+                       self.toe_motion, float(time_s))
         return out
 
     def fill_landmarks(self, landmarks: np.ndarray, filled: np.ndarray | None = None,
@@ -333,7 +336,8 @@ def within_reach(point, toe, hip, reach):
 
 @njit(cache=True)
 def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_kept, last_seen, estimate, out,
-               pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound, reach, toe_motion, time_s):
+               pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound, sound_frames, reach, toe_motion,
+               time_s):
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
         pelvis_motion[TRACKING, 0] = 0.0
@@ -358,7 +362,7 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
         pose_key[:3], pose_key[3:] = local_toe, VELOCITY_S * toe_motion[g, 1]
         line, spacing = foot_line(tracking, foot[g], rot, foot_width[g])
         foot_sound[g] = foot_sound[g] + 1 if spacing == spacing else 0
-        line = line if foot_sound[g] >= FOOT_SOUND_FRAMES else np.zeros(3)
+        line = line if foot_sound[g] >= sound_frames else np.zeros(3)
         lost, measured = False, not filled[key]
         for t in range(nt):
             lost = lost or not vfinite(lm[legs[g, 3 + t]])

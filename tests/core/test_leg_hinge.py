@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mocap_core.landmark_fills import LandmarkFills
-from mocap_core.leg_hinge import COURSE_FRAMES, LegHinge
+from mocap_core.leg_hinge import COURSE_S, LegHinge
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
 
@@ -83,24 +83,31 @@ def test_no_shank_marker_nothing_filled_and_a_wrong_count_is_an_error():
         hinge.fill(lm[101], np.zeros((2, 3)))
 
 
-def test_a_lost_shank_marker_goes_on_at_its_last_step_for_a_few_frames():
-    """Knee, ankle and the shank marker lost together: for COURSE_FRAMES frames the leg is put as by a
-    marker going on at its last step (the same points as a second hinge given that marker), then not."""
+@pytest.mark.parametrize("rate_hz", [None, 240.0])
+def test_a_lost_shank_marker_goes_on_at_its_last_step_for_a_few_frames(rate_hz):
+    """Knee, ankle and the shank marker lost together: for COURSE_S (in frames at the take's rate, from its times;
+    120 Hz without them) the leg is put as by a marker going on at its last step (the same points as a second
+    hinge given that marker), then not."""
     lm, marker = _kicking_leg(120)
     for name in KNEE_ANKLE:
         lm[100:, LANDMARK_INDEX[name]] = np.nan
     hinge, told = LegHinge(["R_shank"]), LegHinge(["R_shank"])
+
+    def at(f):
+        return np.nan if rate_hz is None else f / rate_hz
     for f in range(100):
-        hinge.fill(lm[f], marker[f])
-        told.fill(lm[f].copy(), marker[f])
+        hinge.fill(lm[f], marker[f], time_s=at(f))
+        told.fill(lm[f].copy(), marker[f], time_s=at(f))
     step, gone = marker[99] - marker[98], np.full((1, 3), np.nan)
-    for k in range(1, COURSE_FRAMES + 1):
+    course_frames = round(COURSE_S * (rate_hz or 120.0))
+    for k in range(1, course_frames + 1):
         frame, expected = lm[99 + k].copy(), lm[99 + k].copy()
-        assert hinge.fill(frame, gone).sum() == 4
-        told.fill(expected, marker[99] + k * step)
+        assert hinge.fill(frame, gone, time_s=at(99 + k)).sum() == 4
+        told.fill(expected, marker[99] + k * step, time_s=at(99 + k))
         assert np.allclose(frame, expected, equal_nan=True)
-    frame = lm[100 + COURSE_FRAMES].copy()
-    assert not hinge.fill(frame, gone).any() and np.isnan(frame[LANDMARK_INDEX["R_FLE"]]).all()
+    frame = lm[100 + course_frames].copy()
+    assert not hinge.fill(frame, gone, time_s=at(100 + course_frames)).any()
+    assert np.isnan(frame[LANDMARK_INDEX["R_FLE"]]).all()
 
 
 def test_with_the_shank_marker_lost_the_ankle_puts_the_knee():
@@ -117,7 +124,7 @@ def test_with_the_shank_marker_lost_the_ankle_puts_the_knee():
     out = hidden.copy()
     for f in range(300):
         assert hinge.fill(out[f], gone[f]).sum() == (2 if f >= 150 else 0)
-    after = 150 + COURSE_FRAMES + 1  # (on its course the marker is a guess: 8 mm off at the knee here)
+    after = 150 + round(COURSE_S * 120) + 1  # (no times: 120 Hz; on its course the marker is a guess, 8 mm off)
     error = np.linalg.norm(out[after:, [fle, fme]] - lm[after:, [fle, fme]], axis=2).max(axis=1)
     bent = 45 - 45 * np.cos(3.3 * np.arange(after, 300) / 100) >= 15
     assert 0.3 < bent.mean() < 0.9
