@@ -64,7 +64,10 @@ TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
 # knee+ankle hidden from 0.5 s: 33 / 11 mm, where the memory of 0.5 s gives 53 / 46): legs whose heel
 # is seen are left to it.
 HEEL = "FCC"
-NEIGHBOURS = 20     # remembered poses fitted (dance1: 10 gave the same error, 20 half the jitter)
+# Remembered poses fitted. Over every shared take together (hidden elbows, knees and ankles, the worst case), 10
+# gives a slightly lower mean error than 20 and 40 a higher one, but with 10 a recalled knee jumps where its markers
+# come back (tests/core/test_blend.py); VELOCITY_S was chosen over every take with it.
+NEIGHBOURS = 20
 # How each setting below was chosen, with every value tried, is in docs/gap_filling.md ("The pose memory").
 # No own pose had the toe this near: the other leg's, mirrored, if one did. Decided by the toe's place alone;
 # the velocity's search then looks in the same memory (its own, larger distances fell back far too often).
@@ -91,8 +94,7 @@ FOOT_SOUND_S = 1 / 3
 # stance, with the knee bent differently each time. A second search finds the poses by the toe's place and
 # VELOCITY_S times its velocity (where it will be VELOCITY_S from now), and each target is the two searches'
 # answers weighted by how closely each one's poses agree (inverse variance): where the velocity tells nothing
-# (a dancer standing on one foot) its poses spread and the place's answer stays. walk1's knees 43 / 56 ->
-# 31 / 43 mm.
+# (a dancer standing on one foot) its poses spread and the place's answer stays.
 VELOCITY_S = 0.4
 # The poses found are fitted, not averaged (remembered_poses.local_fit): each target's offset as a linear
 # function of where the pose's toe was, read off where the toe is now. At the edge of what the memory has seen
