@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup bench clean bvh-blender golden results results-blend results-beyond results-short targets checks results-rigid
+.PHONY: demo test setup bench clean bvh-blender golden results results-blend results-beyond results-short targets checks results-rigid results-options
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -66,7 +66,7 @@ results-blend: $(STAMP)
 # The gap-filling options beyond the thesis that the studio graphs use (gapfill.BEYOND_THESIS), as flags of
 # `mocap eval gaps`, with constraints on and the markers removed; a run adds its landmark fills
 # (--rebuild, --pose-memory).
-GAPS_OPTIONS := --constraints on --mode markers --pair-guard --swivel --segment-carry --limb-memory --learned-lengths --body-model \
+GAPS_OPTIONS := --constraints on --mode markers --pair-guard --swivel --segment-carry --limb-memory --body-model \
 	--reacquire-step 0.01
 GAPS_BEYOND_NO_BLEND := $(GAPS_OPTIONS) --end-model
 GAPS_BEYOND := $(GAPS_BEYOND_NO_BLEND) --blend-half-life 0.1
@@ -196,3 +196,7 @@ results-short: $(STAMP)
 # The thesis's method, the studio options and the rigid-skeleton fit side by side on every take (docs/fit.md).
 results-rigid: $(STAMP)
 	$(BIN)/mocap eval rigid --report docs/results/rigid
+
+# What each studio option adds: each left out in turn, on every take.
+results-options: $(STAMP)
+	$(BIN)/mocap eval options --report docs/results/options

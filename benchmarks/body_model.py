@@ -4,7 +4,7 @@ budget, 0.3 ms mean and 1 ms max).
 CMU karate (43 s at 120 Hz): the left elbow's marker is hidden from 20 s. Before the gap the model
 learns two poses a frame (its own arm's and the other's, mirrored); in the gap it predicts every frame
 and is refitted every body_model.REFIT_SAMPLES new poses. Prints the left arm filler's time per frame
-with the studio options (gapfill.BEYOND_THESIS) with and without the model, and one refit.
+with the studio options (fill_options.STUDIO) with and without the model, and one refit.
 
     python benchmarks/body_model.py
 """
@@ -19,13 +19,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from karate_elbow import karate_elbow_lost  # noqa: E402
-from mocap_core.gapfill import BEYOND_THESIS, LimbFiller  # noqa: E402
+from mocap_core.fill_options import STUDIO  # noqa: E402
+from mocap_core.gapfill import LimbFiller  # noqa: E402
 
 
 def main() -> None:
     loc, start, rate_hz = karate_elbow_lost()
     for model in (False, True):
-        filler = LimbFiller("left_arm", **(BEYOND_THESIS | {"body_model": model}))
+        filler = LimbFiller("left_arm", options=STUDIO.model_copy(update={"body_model": model}))
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
         took = np.empty(len(pos))
         for f in range(len(pos)):

@@ -62,7 +62,7 @@ def main() -> None:
 
             def pipeline(beyond):
                 def make():
-                    pipe = SkeletonPipeline(profile, rec.labels, beyond=beyond, rate_hz=rec.rate_hz)
+                    pipe = SkeletonPipeline(profile, rec.labels, options="studio" if beyond else "thesis", rate_hz=rec.rate_hz)
                     return lambda x: pipe.solve_landmarks(pipe.landmarks(x[None]), 0,
                                                           pipe.landmark_map.tracking(x[None]), x[None])
                 return make

@@ -18,13 +18,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from karate_elbow import karate_elbow_lost  # noqa: E402
+from mocap_core.fill_options import FillOptions  # noqa: E402
 from mocap_core.gapfill import LimbFiller  # noqa: E402
 
 
 def main() -> None:
     loc, start, _ = karate_elbow_lost()
     for memory in (False, True):
-        filler = LimbFiller("left_arm", swivel=True, segment_carry=True, limb_memory=memory, reacquire_step_m=0.01)
+        filler = LimbFiller("left_arm", options=FillOptions(swivel=True, segment_carry=True, limb_memory=memory,
+                                                                reacquire_step_m=0.01))
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
         took = np.empty(len(pos))
         for f in range(len(pos)):

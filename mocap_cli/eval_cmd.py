@@ -5,6 +5,7 @@ import csv
 import json
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import get_args
 
@@ -13,15 +14,13 @@ from tqdm import tqdm
 from mocap_cli.measure import LAYOUTS
 from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, blend_lag, gap_run, gap_windows, localize_take,
                                     measured_joints, real_gap_moves, transition_moves, worst_case_timing)
-from mocap_core.gapfill import BEYOND_THESIS, BEYOND_THESIS_HELP
-from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
+from mocap_core.fill_options import HELP as FILL_HELP, STUDIO, FillOptions
+from mocap_core.hip_interpolation import WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
-from mocap_core.pair_guard import PAIR_GUARD_HELP
-from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.partial_means import PartialMeans
-from mocap_core.segment_rebuild import REBUILD_HELP
+from mocap_core.presets import PRESETS
 from mocap_core.warmup import ensure_compiled, warm_up
 
 REPO = Path(__file__).resolve().parents[1]
@@ -66,24 +65,23 @@ def add_parser(sub) -> None:
     g.add_argument("--report", default="reports/gaps",
                    help="directory for gaps.md, gaps.csv, transitions.csv (moves at loss and return) and the plots")
     g.add_argument("--no-plots", action="store_true")
-    g.add_argument("--swivel", action="store_true", help=BEYOND_THESIS_HELP["swivel"])
-    g.add_argument("--segment-carry", action="store_true", help=BEYOND_THESIS_HELP["segment_carry"])
-    g.add_argument("--limb-memory", action="store_true", help=BEYOND_THESIS_HELP["limb_memory"])
-    g.add_argument("--body-model", action="store_true", help=BEYOND_THESIS_HELP["body_model"])
-    g.add_argument("--end-model", action="store_true", help=BEYOND_THESIS_HELP["end_model"])
-    g.add_argument("--learned-lengths", action="store_true", help=BEYOND_THESIS_HELP["learned_lengths"])
-    g.add_argument("--rebuild", action="store_true", help=REBUILD_HELP)
-    g.add_argument("--pose-memory", action="store_true", help=POSE_MEMORY_HELP)
-    g.add_argument("--pair-guard", action="store_true", help=PAIR_GUARD_HELP)
+    g.add_argument("--swivel", action="store_true", help=FILL_HELP["swivel"])
+    g.add_argument("--segment-carry", action="store_true", help=FILL_HELP["segment_carry"])
+    g.add_argument("--limb-memory", action="store_true", help=FILL_HELP["limb_memory"])
+    g.add_argument("--body-model", action="store_true", help=FILL_HELP["body_model"])
+    g.add_argument("--end-model", action="store_true", help=FILL_HELP["end_model"])
+    g.add_argument("--rebuild", action="store_true", help=FILL_HELP["rebuild"])
+    g.add_argument("--pose-memory", action="store_true", help=FILL_HELP["pose_memory"])
+    g.add_argument("--pair-guard", action="store_true", help=FILL_HELP["pair_guard"])
     g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
-                   help=f"(with --remove pelvis) {WHEN_LOST_HELP}")
+                   help=f"(with --remove pelvis) {FILL_HELP['when_lost']}")
     g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
-                   help=BEYOND_THESIS_HELP["reacquire_step_m"])
+                   help=FILL_HELP["reacquire_step_m"])
     g.add_argument("--blend-half-life", type=float, default=0.0, metavar="S",
-                   help=BEYOND_THESIS_HELP["blend_half_life_s"])
+                   help=FILL_HELP["blend_half_life_s"])
     g.add_argument("--no-blend-course", dest="blend_course", action="store_false",
                    help="the blend's spring alone (blend_course false); by default, "
-                        + BEYOND_THESIS_HELP["blend_course"])
+                        + FILL_HELP["blend_course"])
     g.add_argument("--gap-length", type=float, metavar="S",
                    help="short gaps instead of one: hide the joints for S seconds at a time, one gap every "
                         "--gap-every seconds from --from to --to (a studio's occlusions are mostly short)")
@@ -139,8 +137,9 @@ def add_parser(sub) -> None:
     tg.add_argument("--no-plots", action="store_true")
     tg.set_defaults(func=run_targets)
 
-    from mocap_cli import rigid_eval
+    from mocap_cli import options_eval, rigid_eval
     rigid_eval.register(esub)
+    options_eval.register(esub)
 
 
 def run_timing(args) -> int:
@@ -156,14 +155,14 @@ def run_timing(args) -> int:
     for constrained in modes:
         for solver in tqdm(solvers, desc=f"constraints {'on' if constrained else 'off'}", unit="solver"):
             rows.append(worst_case_timing(localized, solver, constrained, SolverParams(), args.repeats,
-                                          BEYOND_THESIS if args.beyond else {}))
+                                          STUDIO if args.beyond else FillOptions()))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "timing.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].as_dict()))
         w.writeheader()
         w.writerows(r.as_dict() for r in rows)
-    md = [f"Worst-case full-body gap fill{' with swivel, segment carry, limb memory, learned lengths, body model and blend' if args.beyond else ''}, "
+    md = [f"Worst-case full-body gap fill{' with swivel, segment carry, limb memory, body model and blend' if args.beyond else ''}, "
           f"{rec.source.split('/')[-1]} ({rows[0].frames} frames, "
           f"{args.repeats} pass(es)), ms per frame. Kernel load/compile before timing: {warmup_s:.2f} s. "
           "\"max, best of passes\": the largest of each frame's fastest pass (every pass does the same work; "
@@ -212,6 +211,13 @@ def run_gaps(args) -> int:
         except ValueError as e:
             raise SystemExit(f"--gap-length {args.gap_length} / --gap-every {args.gap_every} at "
                              f"{rec.rate_hz:g} Hz: {e}") from None
+    try:
+        options = FillOptions(reacquire_step_m=args.reacquire_step, swivel=args.swivel,
+                              segment_carry=args.segment_carry, limb_memory=args.limb_memory,
+                              body_model=args.body_model, end_model=args.end_model,
+                              blend_half_life_s=args.blend_half_life, blend_course=args.blend_course)
+    except ValueError as e:
+        raise SystemExit(f"mocap eval gaps: {e.errors()[0]['msg'].removeprefix('Value error, ')}") from None
     solvers = list(SOLVERS) if args.solvers == "all" else args.solvers.split(",")
     modes = ["markers", "joint"] if args.mode == "both" else [args.mode]
     cons = {"on": [True], "off": [False], "both": [False, True]}[args.constraints]
@@ -225,11 +231,7 @@ def run_gaps(args) -> int:
     combos = [(m, c, s) for m in modes for c in cons for s in solvers]
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
-                            fill_options={"reacquire_step_m": args.reacquire_step, "swivel": args.swivel,
-                                          "segment_carry": args.segment_carry, "limb_memory": args.limb_memory,
-                                          "learned_lengths": args.learned_lengths, "body_model": args.body_model,
-                                          "end_model": args.end_model,
-                                          "blend_half_life_s": args.blend_half_life, "blend_course": args.blend_course},
+                            fill_options=options,
                             hips_lost=args.hips_lost, rebuild=args.rebuild,
                             tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
                             pose_memory=args.pose_memory, short_gaps=short_gaps, rate_hz=rec.rate_hz,
@@ -300,14 +302,16 @@ def run_real_gaps(args) -> int:
 
     rec = read_recording(args.take)
     profile = load_profile(args.profile)
-    variants = {"thesis's method": (False, None),
-                "studio options without the blend": (True, BEYOND_THESIS | {"blend_half_life_s": 0.0}),
-                "studio options": (True, BEYOND_THESIS)}
+    studio = PRESETS["studio"]
+    variants = {"thesis's method": PRESETS["thesis"],
+                "studio options without the blend": replace(studio, ik=studio.ik.model_copy(
+                    update={"blend_half_life_s": 0.0})),
+                "studio options": studio}
     ensure_compiled(log)
     warm_up()
     results, solved = {}, {}
-    for name, (beyond, options) in tqdm(variants.items(), desc="solving", unit="variant"):
-        pipe = SkeletonPipeline(profile, rec.labels, beyond=beyond, rate_hz=rec.rate_hz, fill_options=options)
+    for name, options in tqdm(variants.items(), desc="solving", unit="variant"):
+        pipe = SkeletonPipeline(profile, rec.labels, rate_hz=rec.rate_hz, options=options)
         chunks = list(pipe.run(rec.positions))
         status = np.concatenate([c.status for c in chunks])
         positions, frames = np.concatenate([c.positions for c in chunks]), np.concatenate([c.frames for c in chunks])
@@ -375,7 +379,7 @@ def run_real_gaps(args) -> int:
 
 def options_text(args) -> str:
     on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
-                                  ("--limb-memory", args.limb_memory), ("--learned-lengths", args.learned_lengths),
+                                  ("--limb-memory", args.limb_memory),
                                   ("--body-model", args.body_model), ("--end-model", args.end_model),
                                   ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory),
                                   ("--pair-guard", args.pair_guard)) if flag]

@@ -120,7 +120,7 @@ def _solve(args, rec) -> dict:
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)
     pipe = SkeletonPipeline(profile, rec.labels, args.solver, params, load_constraints(args.constraints),
-                            fill_gaps=not args.no_ik, beyond=not args.thesis, rate_hz=rec.rate_hz)
+                            fill_gaps=not args.no_ik, options="thesis" if args.thesis else "studio", rate_hz=rec.rate_hz)
     return _write(args, rec, profile, pipe.run(rec.positions))
 
 

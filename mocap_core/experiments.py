@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mocap_core.fill_options import FillOptions
 from mocap_core.gapfill import GapFiller
 from mocap_core.hip_interpolation import HIP_LANDMARKS, HipInterpolator
 from mocap_core.ik.solvers import SolverParams
@@ -59,7 +60,7 @@ def localize_take(rec: Recording, profile: Profile):
 
 
 def worst_case_timing(localized, solver: str, constraints: bool, params: SolverParams | None = None,
-                      repeats: int = 1, fill_options: dict | None = None) -> TimingRow:
+                      repeats: int = 1, fill_options: FillOptions | None = None) -> TimingRow:
     """Time the full-body gap fill of every frame with every joint but the kept ones removed.
     Frame 0 stays complete: the IK chains start from the previous frame's solution (thesis 3.6)."""
     pos0, frames0, status0 = localized
@@ -68,7 +69,7 @@ def worst_case_timing(localized, solver: str, constraints: bool, params: SolverP
                           params.escape_max_deg)
     passes, iters, resid = [], [], []
     for _ in range(repeats):
-        filler = GapFiller(solver, params, **(fill_options or {}))
+        filler = GapFiller(solver, params, options=fill_options or FillOptions())
         times = []
         for f in range(len(pos0)):
             pos, frames, status = pos0[f].copy(), frames0[f].copy(), status0[f].copy()
@@ -157,7 +158,7 @@ class GapRun:
 
 def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, joints: list[str], start: int,
             stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
-            fill_options: dict | None = None, hips_lost: str = "hold", rebuild: bool = False,
+            fill_options: FillOptions | None = None, hips_lost: str = "hold", rebuild: bool = False,
             tracking: np.ndarray | None = None, tracking_of: tuple[str, ...] = (),
             pose_memory: bool = False, short_gaps: tuple[int, int] | None = None,
             rate_hz: float | None = None, partial: tuple[np.ndarray, np.ndarray] | None = None,
@@ -210,7 +211,7 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             status[gap, j] = Status.MISSING
     p = params or SolverParams()
     filler = GapFiller(solver, SolverParams(p.max_iterations, p.stop_distance_m, constraints, p.escape_step_deg,
-                                            p.escape_max_deg), **(fill_options or {}))
+                                            p.escape_max_deg), options=fill_options or FillOptions())
     for f in range(len(pos)):
         filler.fill(pos[f], frames[f], status[f], f * frame_s)
     err = np.linalg.norm(pos[gap][:, jidx] - reference[gap][:, jidx], axis=-1)

@@ -33,12 +33,13 @@ from numba import njit
 from mocap_core import analytic_fill as af
 from mocap_core.analytic_fill import all_finite
 from mocap_core.blend import BlendState
-from mocap_core.body_model import BODY_MODEL_HELP, END_MODEL_HELP, END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
+from mocap_core.body_model import END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
+from mocap_core.fill_options import FillOptions
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
 from mocap_core.ik.solvers_kernels import solve
-from mocap_core.limb_memory import LIMB_MEMORY_HELP, LimbMemory
+from mocap_core.limb_memory import LimbMemory
 from mocap_core.skeleton import INDEX, LIMBS, PARENT, Status
 
 MISSING, ESTIMATED, HELD = int(Status.MISSING), int(Status.ESTIMATED), int(Status.HELD)
@@ -52,30 +53,6 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
     "right_leg": LIMBS["right_leg"],
 }
 LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
-# The gap-filling options beyond the thesis, as the studio launch files, `mocap solve` and
-# `mocap eval timing --beyond` use them (docs/gap_filling.md).
-BEYOND_THESIS = {"swivel": True, "segment_carry": True, "limb_memory": True, "learned_lengths": True,
-                 "body_model": True, "end_model": True, "reacquire_step_m": 0.01, "blend_half_life_s": 0.1}
-# What each of them does, said once for the node's params and `mocap eval gaps --help`.
-BEYOND_THESIS_HELP = {
-    "swivel": "beyond the thesis: missing joints between two located ones from bone lengths and the swivel "
-              "angle carried in the next joint's or the limb parent's frame",
-    "segment_carry": "beyond the thesis: a lost ankle moves with its still-tracked foot (heel and toe markers), "
-                     "a lost hand or toe with the last tracked bone before it",
-    "limb_memory": LIMB_MEMORY_HELP + " (with swivel)",
-    "learned_lengths": "beyond the thesis: the swivel's bones as long as they were on average while located, not "
-                       "as long as in the last frame before the gap (with swivel)",
-    "reacquire_step_m": "beyond the thesis: close the gap to returning markers by at most this many metres a "
-                        "frame (0 = the thesis's method: jump)",
-    "body_model": BODY_MODEL_HELP,
-    "end_model": END_MODEL_HELP,
-    "blend_half_life_s": "beyond the thesis: when a joint's markers are lost or come back, go on where the joint "
-                         "was heading and let the offset to the new source die out as a critically damped spring "
-                         "that halves it in this many seconds (0 = off: a jump at loss)",
-    "blend_course": "with blend_half_life_s: after a loss, stay on the markers' course and leave it for the fill "
-                    "only as it grows less trustworthy than the fill has been where the markers came back "
-                    "(learned per joint; false: the spring alone)",
-}
 # The limb whose poses, mirrored, each limb also remembers (limb memory).
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
 # A predicted end is put at most this share of the limb's reach from its root: the joints between stay bent.
@@ -97,10 +74,8 @@ class LimbFiller:
     """Fills the gaps of one limb frame after frame. Owns the limb's previous solved chain."""
 
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
-                 segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True,
-                 end_model: bool = False):
+                 constraints: Constraints | None = None, options: FillOptions = FillOptions()):
+        """``options``: the fills beyond the thesis (none: the thesis's method)."""
         if limb not in LIMB_CHAINS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
@@ -122,31 +97,30 @@ class LimbFiller:
         # them. The offset dies out as a critically damped spring (mocap_core/blend.py). Short gaps, the
         # studio's usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every
         # 0.5 s were 27-29 mm off on average with a jump at loss, 12-14 mm with a half-life of 0.1 s.
-        self.blend = BlendState.empty(n, reacquire_step_m, blend_half_life_s, blend_course)
+        o = options
+        self.blend = BlendState.empty(n, o.reacquire_step_m, o.blend_half_life_s, o.blend_course)
         # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
         # ones on their swivel circle; a lost ankle carried by its foot and a lost end by the bone
         # before it. State: the last well-defined bend direction per run (joint, end, frame kind),
         # and each bone's direction statistics in the frame of the joint it ends at.
-        self.swivel = swivel
+        self.swivel = o.swivel
         self.bend, self.bend_ok = np.zeros((n, n + 1, 2, 3)), np.zeros((n, n + 1, 2), bool)
         self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
-        # Bone lengths learned online: each bone's mean length over the frames that located both
-        # its joints (sum, count). Off, the swivel takes the lengths of the last whole frame: its marker
-        # noise, and the stretch of a limb that straightened past its reach, then last the whole gap.
-        self.learned_lengths = learned_lengths
-        self.lengths = np.zeros((n, 2))  # learned always: the IK chains keep them (the thesis's rigid bones)
-        self.no_lengths = np.zeros((n, 2))
+        # Bone lengths learned online: each bone's mean length over the frames that located both its joints
+        # (sum, count). The IK chains and the swivel keep them (the thesis's rigid bones): the last whole frame's
+        # would keep its marker noise, and the stretch of a limb that straightened past its reach, the whole gap.
+        self.lengths = np.zeros((n, 2))
         self.seen = np.zeros(n, bool)    # joints located at least once
         self.chain_end = n               # the limb's joints up to its last one ever located
         other = MIRRORED.get(limb)  # the other limb's chain, whose poses both memories learn too, mirrored
         other_idx = None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]], dtype=np.int64)
-        self.memory = LimbMemory(n, other_idx) if limb_memory else None
+        self.memory = LimbMemory(n, other_idx) if o.limb_memory else None
         self.no_recall = np.full((n, 3), np.nan)
         # The body model: a lone lost elbow or knee turned on its circle towards where a regression
         # from the rest of the located body puts it (mocap_core.body_model).
         middle = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED]
         self.body_model = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) \
-            if body_model and other_idx is not None and middle else None
+            if o.body_model and other_idx is not None and middle else None
         self.modelled, self.model_weight = np.full((n, 3), np.nan), np.zeros(n)
         # The end model (the "a lost end effector is predicted from the rest of the body"): a limb lost from
         # its first joint down (elbow, wrist and hand; knee, ankle and foot) has its end put where the same kind
@@ -154,13 +128,13 @@ class LimbFiller:
         # between then aim at it. Algorithm 1 held the limb as it was relative to its parent.
         ends = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED_ENDS]
         self.end_model = BodyModel(self.joints, other_idx, ends[0], self.parent_of_root, root=middle[0] - 1) \
-            if end_model and other_idx is not None and middle and ends else None
+            if o.end_model and other_idx is not None and middle and ends else None
         self.end_local = np.full(3, np.nan)  # the lost end's offset from the root where the gap began
         self.end_seen = False                 # and whether its markers were the end's last source
         self.end_since = 0.0                  # and how long the limb has been lost
         self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
-            if segment_carry else None
+            if o.segment_carry else None
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                            c.twists[self.joints], c.has_twist[self.joints])
@@ -191,7 +165,7 @@ class LimbFiller:
                 out[0] += af.swivel_fill(positions, frames, status, idx, self.parent_of_root, prev_pos, prev_frames,
                                          self.prev_parent_frame, self.bend, self.bend_ok, self.dir_sum,
                                          self.dir_sq, self.dir_n, recalled,
-                                         self.lengths if self.learned_lengths else self.no_lengths, self.modelled,
+                                         self.lengths, self.modelled,
                                          self.model_weight)
         p = self.params
         # a limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
@@ -349,15 +323,9 @@ class GapFiller:
     """All five limbs in graph order (torso first), for offline use; the nodes use LimbFiller."""
 
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
-                 constraints: Constraints | None = None, reacquire_step_m: float = 0.0, swivel: bool = False,
-                 segment_carry: bool = False, limb_memory: bool = False, learned_lengths: bool = False,
-                 blend_half_life_s: float = 0.0, body_model: bool = False, blend_course: bool = True,
-                 end_model: bool = False):
+                 constraints: Constraints | None = None, options: FillOptions = FillOptions()):
         constraints = constraints if constraints is not None else load_constraints()
-        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, reacquire_step_m, swivel, segment_carry,
-                                       limb_memory, learned_lengths, blend_half_life_s, body_model, blend_course,
-                                       end_model)
-                      for limb in LIMB_ORDER}
+        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, options) for limb in LIMB_ORDER}
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:
         return {limb: f.fill(positions, frames, status, time_s) for limb, f in self.limbs.items()}

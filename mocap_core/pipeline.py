@@ -13,7 +13,7 @@ import numpy as np
 
 from mocap_core.blend import DEFAULT_FRAME_S
 from mocap_core.gapfill import GapFiller
-from mocap_core.presets import PRESETS
+from mocap_core.presets import PRESETS, Options
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
@@ -39,28 +39,24 @@ class SolvedChunk:
 class SkeletonPipeline:
     def __init__(self, profile: Profile, labels: list[str], solver: str = "ccd",
                  params: SolverParams | None = None, constraints: Constraints | None = None,
-                 fill_gaps: bool = True, beyond: bool = False, rate_hz: float | None = None,
-                 fill_options: dict | None = None):
-        """``beyond``: the gap filling beyond the thesis that the studio launch files use (hips fitted
-        to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles
-        from the pose memory, bony pairs whose spacing jumped dropped, swivel, segment carry, the blends
-        at loss and re-acquisition). ``rate_hz``:
-        the take's frame rate, which paces the blends (else blend.DEFAULT_FRAME_S a frame).
-        ``beyond`` is the ``studio`` preset (mocap_core.presets), as the nodes' ``preset: studio``; ``fill_options``:
-        the gap filler's options instead of the preset's."""
+                 fill_gaps: bool = True, rate_hz: float | None = None, options: Options | str = "thesis"):
+        """``options``: the fills beyond the thesis, a preset's name (mocap_core.presets: ``studio``, the hips fitted
+        to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles from the pose
+        memory, bony pairs whose spacing jumped dropped, swivel, segment carry, the blends at loss and
+        re-acquisition) or both stages' options; ``fill_gaps`` false: none, and no IK. ``rate_hz``: the take's
+        frame rate, which paces the blends (else blend.DEFAULT_FRAME_S a frame)."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
         self.landmark_map = profile.resolve(labels)
         self.gate = MarkerGate()
-        preset = PRESETS["studio" if beyond else "thesis"]
-        hips = {"when_lost": "hold", "rebuild": False, "pose_memory": False, "pair_guard": False, **preset["hips"]}
-        self.hips = HipInterpolator(when_lost=hips["when_lost"])
+        options = PRESETS[options] if isinstance(options, str) else options
+        hips = options.hips
+        self.hips = HipInterpolator(when_lost=hips.when_lost)
         # the landmark fills are gap fills
-        self.fills = LandmarkFills(hips["rebuild"] and fill_gaps, hips["pose_memory"] and fill_gaps,
+        self.fills = LandmarkFills(hips.rebuild and fill_gaps, hips.pose_memory and fill_gaps,
                                    self.landmark_map.tracking_of, self.landmark_map.present(), self.landmark_map,
-                                   pair_guard=hips["pair_guard"] and fill_gaps)
+                                   pair_guard=hips.pair_guard and fill_gaps)
         self.localizer = Localizer(profile.body)
-        options = fill_options if fill_options is not None else preset["ik"]
-        self.filler = GapFiller(solver, params, constraints, **options) if fill_gaps else None
+        self.filler = GapFiller(solver, params, constraints, options.ik) if fill_gaps else None
 
     def landmarks(self, markers: np.ndarray) -> np.ndarray:
         """Marker frames (F, N, 3) -> landmark frames with the pelvis markers filled."""

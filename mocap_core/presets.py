@@ -1,24 +1,30 @@
 """The two ways the graph's stages fill gaps, each named once: ``thesis`` (the thesis's method) and ``studio`` (the
 options beyond it that `mocap solve` uses by default). A stage's ``preset`` param picks one for its section; a param
-given beside it wins (``{preset: studio, swivel: false}``)."""
+given beside it wins (``{preset: studio, end_model: false}``)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
-from mocap_core.gapfill import BEYOND_THESIS
+from mocap_core.fill_options import STUDIO, STUDIO_HIPS, FillOptions, HipOptions
 
 Preset = Literal["thesis", "studio"]
 PRESET_HELP = ("thesis: the thesis's method; studio: the gap filling beyond it (docs/gap_filling.md); a param "
                "given beside it wins")
-PRESETS: dict[str, dict[str, dict]] = {
-    "thesis": {"hips": {}, "ik": {}},
-    "studio": {"hips": {"when_lost": "fit", "rebuild": True, "pose_memory": True, "pair_guard": True},
-               "ik": BEYOND_THESIS},
-}
+
+
+@dataclass(frozen=True)
+class Options:
+    """Both stages' fills: the hip stage's and the IK gap fill's."""
+    hips: HipOptions = HipOptions()
+    ik: FillOptions = FillOptions()
+
+
+PRESETS: dict[str, Options] = {"thesis": Options(), "studio": Options(STUDIO_HIPS, STUDIO)}
 
 
 def with_preset(stage: str, params):
     """A node's raw params with its preset's values for ``stage`` ("hips", "ik") under the ones it gives."""
     if not isinstance(params, dict) or params.get("preset", "thesis") not in PRESETS:
         return params  # pydantic says what is wrong
-    return {**PRESETS[params.get("preset", "thesis")][stage], **params}
+    return {**getattr(PRESETS[params.get("preset", "thesis")], stage).model_dump(), **params}

@@ -50,9 +50,10 @@ def ensure_compiled(log) -> bool:
 def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
     pair guard, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic
-    fills of BEYOND_THESIS)."""
+    fills of the studio options)."""
     from mocap_core.body_model import MIN_SAMPLES
-    from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
+    from mocap_core.fill_options import STUDIO, FillOptions
+    from mocap_core.gapfill import LimbFiller
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.localization import Localizer
     from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
@@ -111,8 +112,8 @@ def _warm(part: str) -> None:
         Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
         quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
         return
-    solver, options = ("ccd", BEYOND_THESIS) if part == "beyond" else (part, {})
-    filler = LimbFiller("left_leg", solver, **options)
+    solver, options = ("ccd", STUDIO) if part == "beyond" else (part, FillOptions())
+    filler = LimbFiller("left_leg", solver, options=options)
     pos = np.zeros((N_JOINTS, 3))
     frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))
     status = np.full(N_JOINTS, Status.LOCATED, np.uint8)

@@ -13,32 +13,27 @@ pair whose spacing jumped, mocap_core.pair_guard).
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
-from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, WHEN_LOST_HELP, HipInterpolator, WhenLost
+from mocap_core.fill_options import HipOptions
+from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, HipInterpolator
 from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.marker_gate import MarkerGate
-from mocap_core.pair_guard import PAIR_GUARD_HELP
-from mocap_core.pose_memory import POSE_MEMORY_HELP
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
 from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
-from mocap_core.segment_rebuild import REBUILD_HELP
 from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 
 
-class Params(BaseModel):
+class Params(HipOptions):
+    """The profile, the pelvis's largest step, and the fills beyond the thesis (HipOptions)."""
     model_config = ConfigDict(extra="forbid")
     profile: str = Field(AUTO, description="marker-set profile name (profiles/) or YAML path; auto: the shipped "
                                            "one the stream's labels fit")
     preset: Preset = Field("thesis", description=PRESET_HELP)
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
-    when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
-    rebuild: bool = Field(False, description=REBUILD_HELP)
-    pose_memory: bool = Field(False, description=POSE_MEMORY_HELP)
-    pair_guard: bool = Field(False, description=PAIR_GUARD_HELP)
 
     @model_validator(mode="before")
     @classmethod
@@ -88,7 +83,7 @@ class HipInterpolation(Node):
                 self.log.warning("never located: %s", line)
         positions, dropped = self.gate.filter(msg.positions, msg.header.capture_time_s)
         for k in np.flatnonzero(dropped):
-            self.ctx.bad_input("marker_jump", f"{msg.labels[k]} moved faster than a body can: dropped this frame")
+            self.ctx.count_error("marker_jump", f"{msg.labels[k]} moved faster than a body can: dropped this frame")
         lm = self.map.apply(positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
@@ -97,7 +92,7 @@ class HipInterpolation(Node):
                                   msg.header.capture_time_s, positions)
         if self.fills.guard is not None:
             for said in self.fills.guard.said():
-                self.ctx.bad_input("pair_dropped", f"{said}: both dropped until their spacing is back")
+                self.ctx.count_error("pair_dropped", f"{said}: both dropped until their spacing is back")
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

@@ -9,10 +9,11 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
 from messages import LimbSolution, SkeletonFrame
-from mocap_core.gapfill import BEYOND_THESIS_HELP, LIMB_CHAINS, LimbFiller
+from mocap_core.fill_options import FillOptions
+from mocap_core.gapfill import LIMB_CHAINS, LimbFiller
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
@@ -22,7 +23,8 @@ from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
 
 
-class Params(BaseModel):
+class Params(FillOptions):
+    """The limb, the solver and its limits, and the fills beyond the thesis (FillOptions)."""
     model_config = ConfigDict(extra="forbid")
     limb: Literal["torso", "left_arm", "right_arm", "left_leg", "right_leg"]
     preset: Preset = Field("thesis", description=PRESET_HELP)
@@ -31,15 +33,6 @@ class Params(BaseModel):
     constraints_file: str | None = None
     max_iterations: int = Field(140, ge=1)
     stop_distance_m: float = Field(0.01, gt=0)
-    swivel: bool = Field(False, description=BEYOND_THESIS_HELP["swivel"])
-    segment_carry: bool = Field(False, description=BEYOND_THESIS_HELP["segment_carry"])
-    limb_memory: bool = Field(False, description=BEYOND_THESIS_HELP["limb_memory"])
-    learned_lengths: bool = Field(False, description=BEYOND_THESIS_HELP["learned_lengths"])
-    body_model: bool = Field(False, description=BEYOND_THESIS_HELP["body_model"])
-    end_model: bool = Field(False, description=BEYOND_THESIS_HELP["end_model"])
-    reacquire_step_m: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["reacquire_step_m"])
-    blend_half_life_s: float = Field(0.0, ge=0, description=BEYOND_THESIS_HELP["blend_half_life_s"])
-    blend_course: bool = Field(True, description=BEYOND_THESIS_HELP["blend_course"])
 
     @model_validator(mode="before")
     @classmethod
@@ -68,9 +61,7 @@ class IkGapfill(Node):
         warm_up()
         p = self.params
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
-                                 load_constraints(p.constraints_file), p.reacquire_step_m, p.swivel,
-                                 p.segment_carry, p.limb_memory, p.learned_lengths, p.blend_half_life_s,
-                                 p.body_model, p.blend_course, p.end_model)
+                                 load_constraints(p.constraints_file), FillOptions.of(p))
         self.names = list(LIMB_CHAINS[p.limb])
 
     def on_message(self, topic, msg: SkeletonFrame) -> None:

@@ -24,6 +24,6 @@ class Lockstep:
             return False
         if time.monotonic() - self.since < self.timeout_s:
             return True
-        self.ctx.bad_input("lockstep_timeout", f"no {self.topic} for frame {self.waiting_for}; going on")
+        self.ctx.count_error("lockstep_timeout", f"no {self.topic} for frame {self.waiting_for}; going on")
         self.waiting_for = None
         return False

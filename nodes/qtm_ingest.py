@@ -96,7 +96,7 @@ class QtmIngest(Node):
             elif kind == "frame":
                 self._publish_frame(*payload)
             elif kind == "error":
-                self.ctx.bad_input(payload[0], payload[1])
+                self.ctx.count_error(payload[0], payload[1])
             try:
                 item = self.inbox.get_nowait()
             except queue.Empty:
@@ -107,7 +107,7 @@ class QtmIngest(Node):
 
     def _publish_frame(self, frame: int, timestamp_us: int, xyz_mm: np.ndarray, received_ns: int) -> None:
         if xyz_mm.shape[0] != len(self.labels):
-            self.ctx.bad_input("label_count", f"frame {frame}: {xyz_mm.shape[0]} markers for {len(self.labels)} labels")
+            self.ctx.count_error("label_count", f"frame {frame}: {xyz_mm.shape[0]} markers for {len(self.labels)} labels")
             return
         pos = (xyz_mm * UNITS_M).astype(np.float32)
         flags = np.where(np.isnan(pos).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)

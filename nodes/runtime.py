@@ -315,7 +315,7 @@ class NodeContext:
             try:
                 reader.hand_over(wire_topic, _freeze_arrays(decode(payload, wire_topic)))
             except DecodeError as e:
-                reader._error(f"decode_{e.kind}", str(e))
+                reader.count_error(f"decode_{e.kind}", str(e))
         self._send(wire_topic, payload)
 
     def _send(self, wire_topic: str, payload: bytes) -> None:
@@ -336,7 +336,7 @@ class NodeContext:
     def receive(self, frames: list[bytes]) -> tuple[str, Message] | None:
         """Decode one multipart frame into (logical topic, message); count and log failures."""
         if len(frames) != 2:
-            self._error("bad_framing", f"expected [topic, payload], got {len(frames)} parts")
+            self.count_error("bad_framing", f"expected [topic, payload], got {len(frames)} parts")
             return None
         wire = frames[0].decode("utf-8", "replace")
         logical = self._logical.get(wire)
@@ -349,7 +349,7 @@ class NodeContext:
                 msg = decode(frames[1], wire, self.subscribes[logical])
                 header = msg.header
         except DecodeError as e:
-            self._error(f"decode_{e.kind}", str(e))
+            self.count_error(f"decode_{e.kind}", str(e))
             return None
         return (logical, msg) if self.account(wire, header) else None
 
@@ -375,21 +375,19 @@ class NodeContext:
     def skipped(self, wire_topic: bytes) -> None:
         self._sub_stats[wire_topic.decode("utf-8", "replace")].drops += 1
 
-    def _error(self, reason: str, text: str) -> None:
-        self.errors[reason] += 1
+    def count_error(self, reason: str, text: str, n: int = 1) -> None:
+        """Something a node met and handled itself (a marker put wrong, a limb late): counted per reason in the
+        heartbeat's errors, the text logged for the first few of each reason and then every 1000th, so a flood
+        cannot fill the disk. The runtime counts its own (bad framing, undecodable messages) the same way."""
+        before = self.errors[reason]
+        self.errors[reason] += n
         self.last_error = text
-        # Log the first few of each kind in full, then every 1000th, so a flood cannot fill the disk.
-        n = self.errors[reason]
-        if n <= 5 or n % 1000 == 0:
-            self.log.warning("%s (%s #%d)", text, reason, n)
-
-    def bad_input(self, reason: str, text: str) -> None:
-        """Bad input a node met and handled itself (a marker put wrong, say): counted per reason in the
-        heartbeat's errors and logged like the runtime's own."""
-        self._error(reason, text)
+        after = self.errors[reason]
+        if before < 5 or after // 1000 > before // 1000:
+            self.log.warning("%s (%s #%d)", text, reason, after)
 
     def handler_error(self, topic: str, exc: BaseException) -> None:
-        self._error(f"handler_{type(exc).__name__}", f"handler for {topic!r} failed: {exc!r}")
+        self.count_error(f"handler_{type(exc).__name__}", f"handler for {topic!r} failed: {exc!r}")
 
     # -- heartbeat ---------------------------------------------------------------------------------
     def heartbeat(self, state: str, started_at: float) -> Heartbeat:

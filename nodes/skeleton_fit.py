@@ -58,7 +58,7 @@ class SkeletonFit(Node):
         calibrations = self.live.calibrations
         out = self.live.add(msg.positions.astype(float), msg.header.capture_time_s)
         for k in np.flatnonzero(self.live.dropped):
-            self.ctx.bad_input("marker_jump", f"{self.labels[k]} moved faster than a body can: dropped this frame")
+            self.ctx.count_error("marker_jump", f"{self.labels[k]} moved faster than a body can: dropped this frame")
         if self.live.calibrations != calibrations:
             self.log.info("calibrated the subject (%d frames)%s", self.live.subject.frames,
                           ", converged" if self.live.converged else "")

@@ -109,7 +109,7 @@ class VmcOutput(Node):
             try:
                 self.sock.sendto(datagram, self.address)
             except OSError as e:  # no route to the receiver (yet): the stream goes on without it
-                self.ctx.bad_input("vmc_send", f"VMC to {self.address[0]}:{self.address[1]}: {e}")
+                self.ctx.count_error("vmc_send", f"VMC to {self.address[0]}:{self.address[1]}: {e}")
                 return
 
     def teardown(self) -> None:

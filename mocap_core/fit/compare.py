@@ -65,7 +65,7 @@ def solve(method: str, markers: np.ndarray, rec: Recording, profile: Profile, su
         return chunk.positions, chunk.status, residual
     if method == NO_TRACKING:
         method, profile = "studio", profile.model_copy(update={"tracking": {}})
-    pipe = SkeletonPipeline(profile, rec.labels, beyond=method == "studio", rate_hz=rec.rate_hz)
+    pipe = SkeletonPipeline(profile, rec.labels, options=method, rate_hz=rec.rate_hz)
     chunks = list(pipe.run(markers))
     return np.concatenate([c.positions for c in chunks]), np.concatenate([c.status for c in chunks]), None
 

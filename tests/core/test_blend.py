@@ -7,7 +7,8 @@ import pytest
 from mocap_core import analytic_fill as af
 from mocap_core import blend
 from mocap_core.experiments import gap_run, transition_moves
-from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
+from mocap_core.fill_options import STUDIO, FillOptions
+from mocap_core.gapfill import LimbFiller
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
@@ -361,7 +362,7 @@ def test_without_a_half_life_the_loss_jumps_and_the_return_closes_linearly_as_be
 
 
 def test_the_clock_keeps_the_last_interval_when_stamps_loop_or_are_missing():
-    filler = LimbFiller("left_arm", blend_half_life_s=HALF_LIFE)
+    filler = LimbFiller("left_arm", options=FillOptions(blend_half_life_s=HALF_LIFE))
     for t in (0.0, 0.004, 0.008, 0.0, float("nan"), 5.0):  # a looping file, a missing stamp, a pause
         filler.blend.advance_clock(t)
     assert filler.blend.frame_s == pytest.approx(0.004)
@@ -380,7 +381,7 @@ def test_short_gaps_on_a_dancers_elbow():
     runs = {}
     for half_life in (0.0, HALF_LIFE):
         runs[half_life] = gap_run(landmarks, reference, prof, ["elbow_l"], int(rec.rate_hz), rec.n_frames, "ccd",
-                                  True, "markers", fill_options=BEYOND_THESIS | {"blend_half_life_s": half_life},
+                                  True, "markers", fill_options=STUDIO.model_copy(update={"blend_half_life_s": half_life}),
                                   short_gaps=(6, 30), rate_hz=rec.rate_hz)
     mean = {h: float(np.nanmean(r.error_m)) for h, r in runs.items()}
     moves = {h: transition_moves(r, reference)[0] for h, r in runs.items()}
@@ -430,7 +431,7 @@ def test_short_gaps_on_a_dancers_knee_and_ankle():
     means, moves = {}, {}
     for course in (False, True):
         run_ = gap_run(landmarks, reference, prof, ["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, "ccd",
-                       True, "markers", fill_options=BEYOND_THESIS | {"blend_course": course}, pose_memory=True,
+                       True, "markers", fill_options=STUDIO.model_copy(update={"blend_course": course}), pose_memory=True,
                        short_gaps=(6, 30), rate_hz=rec.rate_hz)
         means[course] = np.nanmean(run_.error_m, axis=0)
         moves[course] = transition_moves(run_, reference)
@@ -451,7 +452,7 @@ def test_short_gaps_on_another_dancers_knee_and_ankle_come_back_without_a_twitch
     landmarks = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
     run_ = gap_run(landmarks, reference, prof, ["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, "ccd", True,
-                   "markers", fill_options=BEYOND_THESIS, pose_memory=True, short_gaps=(6, 30), rate_hz=rec.rate_hz)
+                   "markers", fill_options=STUDIO, pose_memory=True, short_gaps=(6, 30), rate_hz=rec.rate_hz)
     assert (np.nanmean(run_.error_m, axis=0) < 0.013).all(), np.nanmean(run_.error_m, axis=0)
     for move in transition_moves(run_, reference):
         assert move["loss_added_ratio"] < 1.5 and move["return_added_ratio"] < 1.5, move

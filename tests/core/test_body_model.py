@@ -3,7 +3,8 @@ import numpy as np
 
 from mocap_core.body_model import MAX_SPEED_M_S, MAX_WEIGHT, MIN_SAMPLES, BodyModel
 from mocap_core.experiments import gap_run
-from mocap_core.gapfill import BEYOND_THESIS, LimbFiller
+from mocap_core.fill_options import STUDIO, FillOptions
+from mocap_core.gapfill import LimbFiller
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.localization import Localizer
 from mocap_core.pipeline import SkeletonPipeline
@@ -146,8 +147,8 @@ def test_the_body_model_on_a_dancers_arm():
     mean, upper = {}, {}
     for on in (False, True):
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
-        filler = LimbFiller("left_arm", swivel=True, segment_carry=True, limb_memory=True, learned_lengths=True,
-                            body_model=on)
+        filler = LimbFiller("left_arm", options=FillOptions(swivel=True, segment_carry=True, limb_memory=True,
+                                                               body_model=on))
         for f in range(len(pos)):
             filler.fill(pos[f], frames[f], status[f])
         assert (status[start:, INDEX["elbow_l"]] == Status.ESTIMATED).all()
@@ -223,7 +224,7 @@ def test_the_end_model_on_a_walkers_lost_arm():
     mean = {}
     for on in (False, True):
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
-        filler = LimbFiller("left_arm", **(BEYOND_THESIS | {"end_model": on}))
+        filler = LimbFiller("left_arm", options=STUDIO.model_copy(update={"end_model": on}))
         for f in range(len(pos)):
             filler.fill(pos[f], frames[f], status[f], f / 60.0)
         mean[on] = {j: np.linalg.norm(pos[hidden, INDEX[j]] - truth[hidden, INDEX[j]], axis=1).mean()
@@ -250,7 +251,7 @@ def test_a_leg_whose_hinge_drops_out_is_held_not_handed_to_the_end_model():
     lm = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
     runs = {on: gap_run(lm, reference, prof, ["knee_r", "ankle_r"], int(rec.rate_hz), rec.n_frames, "ccd", True,
-                        "markers", fill_options=BEYOND_THESIS | {"end_model": on}, rebuild=True,
+                        "markers", fill_options=STUDIO.model_copy(update={"end_model": on}), rebuild=True,
                         tracking=pipe.landmark_map.tracking(rec.positions), tracking_of=pipe.landmark_map.tracking_of,
                         rate_hz=rec.rate_hz) for on in (False, True)}
     np.testing.assert_allclose(runs[True].error_m, runs[False].error_m, atol=1e-9)
@@ -267,7 +268,7 @@ def test_a_nan_flood_leaves_the_end_model_working():
     pos[flood] = np.nan
     status[130:140] = Status.LOCATED
     status[140:150] = Status.MISSING
-    filler = LimbFiller("left_arm", **(BEYOND_THESIS | {"end_model": True}))
+    filler = LimbFiller("left_arm", options=STUDIO.model_copy(update={"end_model": True}))
     learned = []
     for f in range(len(pos)):
         filler.fill(pos[f], frames[f], status[f], f / 60.0)
@@ -285,7 +286,7 @@ def test_the_end_model_waits_as_long_with_qtm_stamps_as_with_exact_ones():
     markers[900 - 337:1020 - 337] = np.nan   # the actor walks out for a second
 
     def solve(stamp):
-        pipe = SkeletonPipeline(load_profile("cmu41"), rec.labels, beyond=True, rate_hz=rec.rate_hz)
+        pipe = SkeletonPipeline(load_profile("cmu41"), rec.labels, options="studio", rate_hz=rec.rate_hz)
         fill = pipe.filler.fill
         pipe.filler.fill = lambda p, fr, st, t: fill(p, fr, st, stamp(t))
         return np.concatenate([c.positions for c in pipe.run(markers)])

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from mocap_core.fill_options import FillOptions
 from mocap_core.gapfill import GapFiller, LimbFiller
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.localization import Localizer
@@ -82,7 +83,8 @@ def test_reacquisition_blend_bounds_the_per_frame_move(walk):
     hidden[100:200, [LANDMARK_INDEX["L_FLE"], LANDMARK_INDEX["L_FME"], LANDMARK_INDEX["L_TTC"]]] = np.nan
     moves = {}
     for step in (0.0, 0.005):
-        pos, frames, status = filled(hidden, prof, LimbFiller("left_leg", "ccd", reacquire_step_m=step))
+        pos, frames, status = filled(hidden, prof, LimbFiller("left_leg", "ccd",
+                                                                options=FillOptions(reacquire_step_m=step)))
         k = INDEX["knee_l"]
         moves[step] = np.linalg.norm(np.diff(pos[195:215, k], axis=0), axis=1).max()
         truth, _, _ = localized(lm, prof)
@@ -101,7 +103,7 @@ def test_swivel_option_beats_the_thesis_method_on_a_walk(walk):
     hidden[60:, [LANDMARK_INDEX["L_HLE"], LANDMARK_INDEX["L_HME"]]] = np.nan
     err = {}
     for swivel in (False, True):
-        pos, frames, status = filled(hidden, prof, GapFiller("ccd", swivel=swivel))
+        pos, frames, status = filled(hidden, prof, GapFiller("ccd", options=FillOptions(swivel=swivel)))
         e = INDEX["elbow_l"]
         assert (status[60:, e] == Status.ESTIMATED).all()
         err[swivel] = np.linalg.norm(pos[60:, e] - truth[60:, e], axis=1)
@@ -143,7 +145,8 @@ def test_knee_and_ankle_lost_together_beyond_the_thesis(walk):
     hidden[60:200, [LANDMARK_INDEX[n] for n in ("L_FLE", "L_FME", "L_TTC", "L_FAL", "L_TAM")]] = np.nan
     err = {}
     for beyond in (False, True):
-        pos, frames, status = filled(hidden, prof, GapFiller("ccd", swivel=beyond, segment_carry=beyond))
+        pos, frames, status = filled(hidden, prof, GapFiller("ccd", options=FillOptions(swivel=beyond,
+                                                                                        segment_carry=beyond)))
         k, a = INDEX["knee_l"], INDEX["ankle_l"]
         assert (status[60:200, [k, a]] == Status.ESTIMATED).all()
         err[beyond] = np.linalg.norm(pos[60:200][:, [k, a]] - truth[60:200][:, [k, a]], axis=-1).mean(axis=0)
@@ -189,7 +192,7 @@ def test_lost_hand_moves_with_the_forearm(walk):
     hidden[60:250, LANDMARK_INDEX["L_HM2"]] = np.nan
     err = {}
     for carry in (False, True):
-        pos, frames, status = filled(hidden, prof, GapFiller("ccd", segment_carry=carry))
+        pos, frames, status = filled(hidden, prof, GapFiller("ccd", options=FillOptions(segment_carry=carry)))
         h = INDEX["hand_l"]
         assert (status[60:250, h] == Status.HELD).all() and np.isfinite(frames[60:250, INDEX["wrist_l"]]).all()
         err[carry] = np.linalg.norm(pos[60:250, h] - truth[60:250, h], axis=1)
@@ -237,7 +240,7 @@ def test_a_lost_shoulders_frame_does_not_flip_where_its_acromion_flickers():
     from mocap_core.experiments import _turns_deg
 
     rec = read_recording(data_file("12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"))
-    pipe = SkeletonPipeline(load_profile("vicon53"), rec.labels, beyond=True, rate_hz=rec.rate_hz)
+    pipe = SkeletonPipeline(load_profile("vicon53"), rec.labels, options="studio", rate_hz=rec.rate_hz)
     pipe.partial = None
     chunk = next(pipe.run(rec.positions[:240], chunk=240))
     assert chunk.status[199, INDEX["shoulder_l"]] == Status.ESTIMATED

@@ -1,6 +1,7 @@
 """The limb memory: a lost elbow's swivel from the limb's earlier poses and the other limb's, mirrored."""
 import numpy as np
 
+from mocap_core.fill_options import FillOptions
 from mocap_core.gapfill import LimbFiller
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.localization import Localizer
@@ -53,7 +54,7 @@ def mirrored(pose):
 def run(memory: bool):
     """The right arm shows the motion for 3000 frames while the left elbow is lost after frame 0; the
     left wrist then goes over the same path, from another phase."""
-    filler = LimbFiller("left_arm", swivel=True, limb_memory=memory)
+    filler = LimbFiller("left_arm", options=FillOptions(swivel=True, limb_memory=memory))
     errors, own_poses = [], []
     for f in range(3000):
         right = mirrored(left_arm_pose(0.01 * f))
@@ -98,7 +99,8 @@ def test_limb_memory_on_a_dancers_arm():
     mean = {}
     for memory in (False, True):
         pos, frames, status = loc.positions.copy(), loc.frames.copy(), loc.status.copy()
-        filler = LimbFiller("right_arm", swivel=True, segment_carry=True, limb_memory=memory)
+        filler = LimbFiller("right_arm", options=FillOptions(swivel=True, segment_carry=True,
+                                                                   limb_memory=memory))
         for f in range(len(pos)):
             filler.fill(pos[f], frames[f], status[f])
         assert (status[start:, INDEX["elbow_r"]] == Status.ESTIMATED).all()

@@ -51,7 +51,7 @@ def test_one_glitched_frame_leaves_no_trace_a_second_later():
     profile = load_profile("cmu41")
 
     def solve(markers):
-        pipe = SkeletonPipeline(profile, rec.labels, beyond=True, rate_hz=rec.rate_hz)
+        pipe = SkeletonPipeline(profile, rec.labels, options="studio", rate_hz=rec.rate_hz)
         return np.concatenate([c.positions for c in pipe.run(markers)])
 
     clean = solve(rec.positions)

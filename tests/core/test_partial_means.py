@@ -134,7 +134,7 @@ def test_the_chest_and_shoulder_frames_stay_steady_where_a_shoulder_marker_flick
     fell back to other markers and turned up to 50 degrees in a frame, and the left shoulder, estimated out of
     reach, 130-175. With the studio options no chest, clavicle or shoulder frame turns over 30 degrees in a frame."""
     rec = read_recording(data_file(VICON))
-    pipe = SkeletonPipeline(load_profile("vicon53"), rec.labels, beyond=True, rate_hz=rec.rate_hz)
+    pipe = SkeletonPipeline(load_profile("vicon53"), rec.labels, options="studio", rate_hz=rec.rate_hz)
     frames = np.concatenate([c.frames for c in pipe.run(rec.positions[:400])])
     for joint in ("spine3", "neck", "clavicle_l", "clavicle_r", "shoulder_l", "shoulder_r"):
         turns = _turns_deg(frames[:, INDEX[joint]])

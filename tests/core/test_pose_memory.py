@@ -2,7 +2,7 @@
 import numpy as np
 
 from mocap_core.experiments import gap_run
-from mocap_core.gapfill import BEYOND_THESIS
+from mocap_core.fill_options import STUDIO
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.ik.kernels import rotation_vector, turned_by
 from mocap_core.localization import hip_centres
@@ -121,7 +121,7 @@ def _dance_gap(take: str, side: str, memory: bool, start_s: float = 5.0, stop_s:
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
     stop = rec.n_frames if stop_s is None else int(stop_s * rec.rate_hz)
     run = gap_run(lm, reference, prof, [f"knee_{side}", f"ankle_{side}"], int(start_s * rec.rate_hz), stop,
-                  "ccd", True, "markers", fill_options=BEYOND_THESIS, pose_memory=memory,
+                  "ccd", True, "markers", fill_options=STUDIO, pose_memory=memory,
                   tracking=pipe.landmark_map.tracking(rec.positions) if toe_line else None,
                   tracking_of=pipe.landmark_map.tracking_of, rate_hz=rec.rate_hz)
     return run.stats(0)["mean"], run.stats(1)["mean"]

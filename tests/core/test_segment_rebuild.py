@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mocap_core.experiments import gap_run
-from mocap_core.gapfill import BEYOND_THESIS
+from mocap_core.fill_options import STUDIO
 from mocap_core.geometry import rigid_fit
 from mocap_core.localization import Localizer
 from mocap_core.pipeline import SkeletonPipeline
@@ -562,7 +562,7 @@ def _gap(take, profile, joints, start_s, stop_s=None, part=None, rebuilds=(False
     start = int(start_s * rec.rate_hz)
     stop = rec.n_frames if stop_s is None else int(stop_s * rec.rate_hz)
     return {rebuild: gap_run(lm, reference, prof, joints, start, stop, "ccd", True, "markers",
-                             fill_options=BEYOND_THESIS, rebuild=rebuild,
+                             fill_options=STUDIO, rebuild=rebuild,
                              tracking=pipe.landmark_map.tracking(rec.positions),
                              tracking_of=pipe.landmark_map.tracking_of, rate_hz=rec.rate_hz) for rebuild in rebuilds}
 

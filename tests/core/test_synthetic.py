@@ -1,6 +1,7 @@
 """The synthetic PAF running take: its markers give back its known joint centres."""
 import numpy as np
 
+from mocap_core.fill_options import FillOptions
 from mocap_core.gapfill import GapFiller
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import load_profile
@@ -41,7 +42,7 @@ def test_localization_and_gap_filling_against_the_truth():
     errors = {}
     for swivel in (False, True):
         solved = SkeletonPipeline(prof, rec.labels)
-        solved.filler = GapFiller("ccd", swivel=swivel)
+        solved.filler = GapFiller("ccd", options=FillOptions(swivel=swivel))
         out = solved.solve_landmarks(solved.landmarks(rec.positions))
         first = int(np.argmax((out.status != Status.MISSING).all(axis=1)))
         assert (out.status[first:] != Status.MISSING).all()

@@ -94,12 +94,15 @@ def test_a_node_that_cannot_start_stops_the_launch_with_one_line(tmp_path, overr
 
 
 def test_preset_studio_is_the_gap_filling_beyond_the_thesis_and_a_param_beside_it_wins():
-    from mocap_core.gapfill import BEYOND_THESIS
+    from mocap_core.fill_options import STUDIO, FillOptions
     from nodes.hip_interpolation import Params as HipParams
     from nodes.ik_gapfill import Params as IkParams
 
-    ik = IkParams.model_validate({"limb": "left_arm", "preset": "studio", "swivel": False})
-    assert {k: getattr(ik, k) for k in BEYOND_THESIS} == {**BEYOND_THESIS, "swivel": False}
+    ik = IkParams.model_validate({"limb": "left_arm", "preset": "studio", "end_model": False})
+    assert FillOptions.of(ik) == STUDIO.model_copy(update={"end_model": False})
+    # the swivel off leaves the limb memory and the body model, which steer it, idle: refused, saying so
+    with pytest.raises(ValueError, match="limb_memory and body_model steer the swivel, which is off"):
+        IkParams.model_validate({"limb": "left_arm", "preset": "studio", "swivel": False})
     assert IkParams.model_validate({"limb": "torso"}).swivel is False          # the thesis's method by default
     hips = HipParams.model_validate({"preset": "studio"})
     assert (hips.when_lost, hips.rebuild, hips.pose_memory, hips.pair_guard) == ("fit", True, True, True)
