@@ -43,8 +43,7 @@ class Params(FillOptions):
 class IkGapfill(Node):
     kind = "ik_gapfill"
     Params = Params
-    subscribes = {"in": SkeletonFrame}
-    publishes = {"skeleton/torso": SkeletonFrame, "out": LimbSolution}
+    # (its topics depend on the limb: inputs and outputs are its declaration)
 
     @classmethod
     def inputs(cls, params):

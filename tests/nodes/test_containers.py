@@ -202,8 +202,8 @@ def test_hand_over_gives_neighbours_the_object_read_only_and_a_relay_stamps_a_co
             raise AssertionError("a neighbour could write into a handed-over array")
         except ValueError:
             pass
-        assert b.ctx._sub_stats["m/a"].count == 1 and b.ctx._sub_stats["m/a"].drops == 0
-        assert b.ctx._pub_stats["m/b"].count == 1, "b's publish is counted even with nobody outside"
+        assert b.ctx.stats.received["m/a"].count == 1 and b.ctx.stats.received["m/a"].drops == 0
+        assert b.ctx.stats.published["m/b"].count == 1, "b's publish is counted even with nobody outside"
         assert a.ctx.local_readers.keys() == {"m/a"} and not b.ctx.local_readers
     finally:
         for loop in loops:

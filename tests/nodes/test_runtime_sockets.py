@@ -46,9 +46,9 @@ def test_messages_of_one_or_three_parts_are_counted_as_bad_framing_and_the_rest_
         feed.send_multipart([b"m/raw"])                        # one part: no payload
         feed.send_multipart([b"m/raw", frame(1), b"extra"])    # three parts
         feed.send_multipart([b"m/raw", frame(2)])              # a good one after them
-        stats = loop.ctx._sub_stats
+        stats = loop.ctx.stats.received
         pump(loop, lambda: stats["m/raw"].count >= 1)
-        assert loop.ctx.errors["bad_framing"] == 2, dict(loop.ctx.errors)
+        assert loop.ctx.stats.errors["bad_framing"] == 2, dict(loop.ctx.stats.errors)
         assert stats["m/raw"].count == 1
         assert out.poll(1000), "the good frame was not relayed"
         topic, payload = out.recv_multipart()
