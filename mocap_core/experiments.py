@@ -64,9 +64,7 @@ def worst_case_timing(localized, solver: str, constraints: bool, params: SolverP
     """Time the full-body gap fill of every frame with every joint but the kept ones removed.
     Frame 0 stays complete: the IK chains start from the previous frame's solution (thesis 3.6)."""
     pos0, frames0, status0 = localized
-    params = params or SolverParams()
-    params = SolverParams(params.max_iterations, params.stop_distance_m, constraints, params.escape_step_deg,
-                          params.escape_max_deg)
+    params = (params or SolverParams())._replace(constraints=constraints)
     passes, iters, resid = [], [], []
     for _ in range(repeats):
         filler = GapFiller(solver, params, options=fill_options or FillOptions())
@@ -209,9 +207,8 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
             pos[gap, j] = np.nan
             frames[gap, j] = np.nan
             status[gap, j] = Status.MISSING
-    p = params or SolverParams()
-    filler = GapFiller(solver, SolverParams(p.max_iterations, p.stop_distance_m, constraints, p.escape_step_deg,
-                                            p.escape_max_deg), options=fill_options or FillOptions())
+    filler = GapFiller(solver, (params or SolverParams())._replace(constraints=constraints),
+                       options=fill_options or FillOptions())
     for f in range(len(pos)):
         filler.fill(pos[f], frames[f], status[f], f * frame_s)
     err = np.linalg.norm(pos[gap][:, jidx] - reference[gap][:, jidx], axis=-1)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,7 +38,7 @@ from mocap_core.body_model import END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
 from mocap_core.fill_options import FillOptions
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
-from mocap_core.ik.solvers import KernelSolver, SolverParams, get_solver
+from mocap_core.ik.solvers import ChainLimits, KernelSolver, SolverParams, get_solver
 from mocap_core.ik.solvers_kernels import solve
 from mocap_core.limb_memory import LimbMemory
 from mocap_core.skeleton import INDEX, LIMBS, PARENT, Status
@@ -80,7 +81,7 @@ class LimbFiller:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
         self.limb = limb
         self.solver = get_solver(solver) if isinstance(solver, str) else solver
-        self.params = params or SolverParams()
+        self.params = (params or SolverParams()).typed()
         self.constraints = constraints or load_constraints()
         self.joints = np.array([INDEX[j] for j in LIMB_CHAINS[limb]], dtype=np.int64)
         self.parent_of_root = INDEX[PARENT[LIMB_CHAINS[limb][0]]]
@@ -112,6 +113,7 @@ class LimbFiller:
         self.lengths = np.zeros((n, 2))
         self.seen = np.zeros(n, bool)    # joints located at least once
         self.chain_end = n               # the limb's joints up to its last one ever located
+        self._chain = None               # and what the kernel takes of them (_chain_up_to)
         other = MIRRORED.get(limb)  # the other limb's chain, whose poses both memories learn too, mirrored
         other_idx = None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]], dtype=np.int64)
         self.memory = LimbMemory(n, other_idx) if o.limb_memory else None
@@ -136,8 +138,8 @@ class LimbFiller:
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if o.segment_carry else None
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
-        self._limits_of = (c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
-                           c.twists[self.joints], c.has_twist[self.joints])
+        self.limits = ChainLimits(np.eye(3), c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
+                                  c.twists[self.joints], c.has_twist[self.joints])  # (each run's ref0 its own)
 
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray,
              time_s: float = float("nan")) -> FillStats:
@@ -167,23 +169,28 @@ class LimbFiller:
                                          self.dir_sq, self.dir_n, recalled,
                                          self.lengths, self.modelled,
                                          self.model_weight)
-        p = self.params
         # a limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
         # wrist (the hand, never seen, would keep the limb from ever being whole, and so from ever being filled)
         self.seen |= status[idx] == af.LOCATED
         n = int(np.flatnonzero(self.seen)[-1]) + 1 if self.seen.any() else len(idx)
-        if n != self.chain_end:  # a joint seen for the first time: the limb is whole again only once it is seen
-            self.chain_end, self.has_prev[0] = n, False
-        _fill_limb(positions, frames, status, idx[:n], self.parent_of_root, self.limb.endswith("arm"),
-                   self.prev_pos[:n], self.prev_frames[:n], self.prev_parent_frame, self.has_prev, self.lengths,
-                   *(a[:n] for a in self._limits_of), self.solver.kernel_id, p.constraints, p.max_iterations,
-                   p.stop_distance_m, p.escape_step_deg, p.escape_max_deg, out)
+        if n != self.chain_end or self._chain is None:  # a joint seen for the first time: the limb is whole again
+            self.chain_end, self.has_prev[0] = n, False        # only once it is seen
+            self._chain = self._chain_up_to(n)
+        _fill_limb(Pose(positions, frames, status), *self._chain, self.solver.kernel_id, self.params, out)
         never = idx[n:]  # joints never located (the carries would hold them from nothing)
         positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
         if self.blend.on:
             self.blend.blend(positions, status, idx, frames)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
+
+    def _chain_up_to(self, n: int) -> tuple[LimbChain, ChainMemory, ChainLimits]:
+        """What Algorithm 1 takes of the limb's first n joints: views of its state, which the kernel updates."""
+        lim = self.limits
+        return (LimbChain(self.joints[:n], self.parent_of_root, self.limb.endswith("arm")),
+                ChainMemory(self.prev_pos[:n], self.prev_frames[:n], self.prev_parent_frame, self.has_prev,
+                            self.lengths),
+                ChainLimits(lim.ref0, lim.pp[:n], lim.cones[:n], lim.has_cone[:n], lim.twists[:n], lim.has_twist[:n]))
 
     def _predict_end(self, positions, frames, status) -> int:
         """The end model's point for a limb lost from its first joint down, within the limb's reach; 1 if put."""
@@ -241,11 +248,34 @@ def _rigid_chain(prev_pos, lengths, root, m):
     return P
 
 
+class Pose(NamedTuple):
+    """One skeleton frame as the kernels fill it in place: positions (J, 3), bone frames (J, 3, 3), status (J,)."""
+    positions: np.ndarray
+    frames: np.ndarray
+    status: np.ndarray
+
+
+class LimbChain(NamedTuple):
+    idx: np.ndarray        # the limb's joints, root first
+    parent: int            # the joint the limb hangs from
+    is_arm: bool
+
+
+class ChainMemory(NamedTuple):
+    """A limb's last whole output, the next frame's starting chain, and its bones' learned lengths."""
+    prev_pos: np.ndarray
+    prev_frames: np.ndarray
+    prev_parent: np.ndarray
+    has_prev: np.ndarray
+    lengths: np.ndarray
+
+
 @njit(cache=True)
-def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_frames, prev_parent, has_prev,
-               lengths, pp, cones, has_cone, twists, has_twist, solver, constrained, max_iter, stop_m, esc_step,
-               esc_max, out):
+def _fill_limb(pose, chain, memory, limits, solver, params, out):
     """Algorithm 1 for one limb, in place. out = [estimated, held, iterations, max residual m]."""
+    positions, frames, status = pose
+    idx, parent, is_arm = chain
+    prev_pos, prev_frames, prev_parent, has_prev, lengths = memory
     n = idx.shape[0]
     parent_frame = frames[parent].copy()
     if status[idx[0]] == MISSING and is_arm and status[parent] != MISSING:
@@ -277,13 +307,13 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
                 ref0 = parent_frame
             if t < n:
                 target = positions[idx[t]].astype(np.float64)
-                it, res = solve(solver, P, R, target, ref0, pp[root:last], cones[root:last], has_cone[root:last],
-                                twists[root:last], has_twist[root:last], constrained, max_iter, stop_m, esc_step,
-                                esc_max)
+                run = ChainLimits(ref0, limits.pp[root:last], limits.cones[root:last], limits.has_cone[root:last],
+                                  limits.twists[root:last], limits.has_twist[root:last])
+                it, res = solve(solver, P, R, target, run, params)
                 out[2] += it
                 out[3] = max(out[3], res)
                 first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position, if reached
-                if res > stop_m:
+                if res > params.stop_distance_m:
                     # out of the rigid chain's reach: the target and the joints after it hang at the chain's end,
                     # as they are, so no bone stretches (the thesis's C# code keeps every bone's length too)
                     shift = P[m] - target

@@ -351,9 +351,10 @@ def clamp_twist(alpha, lo, hi):
 
 
 @njit(cache=True)
-def constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist):
-    """Bring bone i inside its cone and twist limits, moving everything it carries. True if moved."""
-    ref = ref_frame(R, ref0, pp, i)
+def constrain_bone(P, R, i, limits):
+    """Bring bone i inside its cone and twist limits (ChainLimits), moving everything it carries. True if moved."""
+    pp, cones, has_cone, twists, has_twist = limits.pp, limits.cones, limits.has_cone, limits.twists, limits.has_twist
+    ref = ref_frame(R, limits.ref0, pp, i)
     moved = False
     if has_cone[i]:
         d = P[i + 1] - P[i]
@@ -376,9 +377,9 @@ def constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist):
 
 
 @njit(cache=True)
-def constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist):
+def constrain_chain(P, R, limits):
     for i in range(R.shape[0]):
-        constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist)
+        constrain_bone(P, R, i, limits)
 
 
 @njit(cache=True)

@@ -6,24 +6,30 @@ so that its end effector reaches ``target``, honouring the chain's limits when a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
 from mocap_core.ik import solvers_kernels as k
 
 
-@dataclass(frozen=True)
-class SolverParams:
+class SolverParams(NamedTuple):
+    """How a solver runs: a tuple, as the numba kernels take it."""
     max_iterations: int = 140        # CCD's cap in the thesis's code (facts 9.2)
     stop_distance_m: float = 0.01    # IK threshold of the thesis's code
     constraints: bool = True
     escape_step_deg: float = 10.0    # deadlock escape: rotate the chain +-10, +-20 ... degrees
     escape_max_deg: float = 120.0
 
+    def typed(self) -> "SolverParams":
+        """Each field of its declared type, the types the kernels are compiled for (an int given for a float would
+        compile them again, on a live node's first frame)."""
+        return SolverParams(int(self.max_iterations), float(self.stop_distance_m), bool(self.constraints),
+                            float(self.escape_step_deg), float(self.escape_max_deg))
 
-@dataclass
-class ChainLimits:
+
+class ChainLimits(NamedTuple):
+    """A chain's joint limits (thesis 3.5.4), bone by bone: a tuple, as the numba kernels take it."""
     ref0: np.ndarray       # (3, 3) frame of the chain root's parent
     pp: np.ndarray         # (n, 3, 3)
     cones: np.ndarray      # (n, 4) radians
@@ -53,10 +59,7 @@ class KernelSolver:
     kernel_id: int
 
     def solve(self, P, R, target, limits, params):
-        it, res = k.solve(self.kernel_id, P, R, np.asarray(target, np.float64), limits.ref0, limits.pp,
-                          limits.cones, limits.has_cone, limits.twists, limits.has_twist, params.constraints,
-                          params.max_iterations, params.stop_distance_m, params.escape_step_deg,
-                          params.escape_max_deg)
+        it, res = k.solve(self.kernel_id, P, R, np.asarray(target, np.float64), limits, params.typed())
         return SolveResult(int(it), float(res))
 
 

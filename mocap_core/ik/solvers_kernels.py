@@ -26,18 +26,18 @@ ESCAPE_GAIN = 0.1
 
 
 @njit(cache=True)
-def ccd_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+def ccd_step(P, R, target, limits, constrained):
     """Cyclic coordinate descent (thesis 3.5.2): from the last bone to the first, turn each bone so
     the end effector points at the target, then enforce that bone's limits."""
     n = R.shape[0]
     for i in range(n - 1, -1, -1):
         rotate_subchain(P, R, i, rotation_between(P[n] - P[i], target - P[i]))
         if constrained:
-            constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist)
+            constrain_bone(P, R, i, limits)
 
 
 @njit(cache=True)
-def fabrik_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+def fabrik_step(P, R, target, limits, constrained):
     """FABRIK (thesis 3.5.3, Aristidou and Lasenby 2011): a forward pass from the target, then a
     backward pass from the root in which each bone is re-aimed, its frame carried by the shortest
     arc, and its cone and twist limits enforced."""
@@ -63,7 +63,7 @@ def fabrik_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, cons
             continue
         rotate_subchain(P, R, i, rotation_between(P[i + 1] - P[i], d))
         if constrained:
-            constrain_bone(P, R, i, ref0, pp, cones, has_cone, twists, has_twist)
+            constrain_bone(P, R, i, limits)
 
 
 @njit(cache=True)
@@ -91,7 +91,7 @@ def apply_angles(P, R, dtheta):
 
 
 @njit(cache=True)
-def jt_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+def jt_step(P, R, target, limits, constrained):
     """Jacobian transpose (thesis 3.5.1) with the step that minimises the new error (Buss 2004):
     alpha = <e, J J^T e> / <J J^T e, J J^T e>."""
     n = R.shape[0]
@@ -104,11 +104,11 @@ def jt_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrai
         return
     apply_angles(P, R, g * ((e @ jje) / denom))
     if constrained:
-        constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+        constrain_chain(P, R, limits)
 
 
 @njit(cache=True)
-def dls_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+def dls_step(P, R, target, limits, constrained):
     """Damped least squares (thesis 3.5.1): dtheta = J^T (J J^T + lambda^2 I)^-1 e, lambda = 1.1."""
     n = R.shape[0]
     J = jacobian(P, n)
@@ -116,31 +116,32 @@ def dls_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constra
     A = J @ J.T + (DLS_LAMBDA * DLS_LAMBDA) * np.eye(3)
     apply_angles(P, R, J.T @ np.linalg.solve(A, e))
     if constrained:
-        constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+        constrain_chain(P, R, limits)
 
 
 @njit(cache=True)
-def _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained):
+def _step(solver, P, R, target, limits, constrained):
     if solver == CCD:
-        ccd_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+        ccd_step(P, R, target, limits, constrained)
     elif solver == FABRIK:
-        fabrik_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+        fabrik_step(P, R, target, limits, constrained)
     elif solver == JACOBIAN_TRANSPOSE:
-        jt_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+        jt_step(P, R, target, limits, constrained)
     else:
-        dls_step(P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+        dls_step(P, R, target, limits, constrained)
 
 
 @njit(cache=True)
-def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained,
-          max_iter, stop_m, escape_step_deg, escape_max_deg, escape_patience=2):
-    """Run a solver on the chain in place; returns (iterations, residual distance in metres).
+def solve(solver, P, R, target, limits, params, escape_patience=2):
+    """Run a solver on the chain in place, within ``limits`` (ChainLimits) when ``params`` (SolverParams) say so;
+    returns (iterations, residual distance in metres).
 
     An unreachable target (farther than the chain is long) gets the chain stretched straight at
     it, as in the thesis's code, then limited. When the distance stops shrinking the deadlock
     escape turns the whole chain and the solver goes on; the best pose seen is kept. After
     ``escape_patience`` escapes in a row that gain less than ESCAPE_GAIN the target is taken as
     out of reach within the limits, and the best pose is returned."""
+    constrained, max_iter, stop_m = params.constraints, params.max_iterations, params.stop_distance_m
     n = R.shape[0]
     total = 0.0
     for i in range(n):
@@ -150,7 +151,7 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
         for i in range(n):
             rotate_subchain(P, R, i, rotation_between(P[i + 1] - P[i], target - P[i]))
         if constrained:
-            constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+            constrain_chain(P, R, limits)
         return 0, vnorm(P[n] - target)
     best = vnorm(P[n] - target)
     bestP, bestR = P.copy(), R.copy()
@@ -163,7 +164,7 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
     window_best = best      # a limited non-CCD solver that does not halve its distance in a window crawls
     it = 0
     while it < max_iter and best > stop_m:
-        _step(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, constrained)
+        _step(solver, P, R, target, limits, constrained)
         it += 1
         dist = vnorm(P[n] - target)
         # Progress is judged against the best distance since the last escape, not the last step's:
@@ -201,11 +202,11 @@ def solve(solver, P, R, target, ref0, pp, cones, has_cone, twists, has_twist, co
             best_at_escape = best
             if fruitless > escape_patience:
                 break
-            if not escape_rotation(P, R, ref0, attempt, escape_step_deg, escape_max_deg):
+            if not escape_rotation(P, R, limits.ref0, attempt, params.escape_step_deg, params.escape_max_deg):
                 break
             attempt += 1
             if constrained:
-                constrain_chain(P, R, ref0, pp, cones, has_cone, twists, has_twist)
+                constrain_chain(P, R, limits)
             local = vnorm(P[n] - target)  # progress is judged afresh from the turned pose
     P[:] = bestP
     R[:] = bestR

@@ -148,9 +148,8 @@ def test_after_any_solve_limits_hold_and_lengths_are_kept(name, target):
     P, R = straight_chain(lengths)
     ref0 = frame_yx(np.array([0, 1.0, 0]), np.array([0, 0, -1.0]))  # clavicle: y left, x down, z forward
     bones, limits = arm_chain_limits(CONSTRAINTS)
-    limits.ref0 = np.ascontiguousarray(ref0)
-    kernels.constrain_chain(P, R, limits.ref0, limits.pp, limits.cones, limits.has_cone, limits.twists,
-                            limits.has_twist)
+    limits = limits._replace(ref0=np.ascontiguousarray(ref0))
+    kernels.constrain_chain(P, R, limits)
     get_solver(name).solve(P, R, np.array(target), limits, SolverParams(max_iterations=60))
     np.testing.assert_allclose(lengths_of(P), lengths, atol=1e-9)
     for i in range(3):
