@@ -95,9 +95,7 @@ class LimbFiller:
         # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
         # Inertialization at both ends of a gap (blend_half_life_s): a joint whose markers are lost
         # goes on where it was heading, then eases into the estimate; one whose markers come back eases into
-        # them. The offset dies out as a critically damped spring (mocap_core/blend.py). Short gaps, the
-        # studio's usual ones, then stay near the markers' last course: dance2's elbows hidden 0.1 s in every
-        # 0.5 s were 27-29 mm off on average with a jump at loss, 12-14 mm with a half-life of 0.1 s.
+        # them. The offset dies out as a critically damped spring (mocap_core/blend.py).
         o = options
         self.blend = BlendState.empty(n, o.reacquire_step_m, o.blend_half_life_s, o.blend_course)
         # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
@@ -118,19 +116,8 @@ class LimbFiller:
         other_idx = None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]], dtype=np.int64)
         self.memory = LimbMemory(n, other_idx) if o.limb_memory else None
         self.no_recall = np.full((n, 3), np.nan)
-        # The body model: a lone lost elbow or knee turned on its circle towards where a regression
-        # from the rest of the located body puts it (mocap_core.body_model).
-        middle = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED]
-        self.body_model = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) \
-            if o.body_model and other_idx is not None and middle else None
+        self.body_model, self.end_model = self._models(o, other_idx)
         self.modelled, self.model_weight = np.full((n, 3), np.nan), np.zeros(n)
-        # The end model (the "a lost end effector is predicted from the rest of the body"): a limb lost from
-        # its first joint down (elbow, wrist and hand; knee, ankle and foot) has its end put where the same kind
-        # of regression puts it, learned from the wrist's (ankle's) place from the shoulder (hip); the joints
-        # between then aim at it. Algorithm 1 held the limb as it was relative to its parent.
-        ends = [k for k, name in enumerate(LIMB_CHAINS[limb]) if name in MODELLED_ENDS]
-        self.end_model = BodyModel(self.joints, other_idx, ends[0], self.parent_of_root, root=middle[0] - 1) \
-            if o.end_model and other_idx is not None and middle and ends else None
         self.end_local = np.full(3, np.nan)  # the lost end's offset from the root where the gap began
         self.end_seen = False                 # and whether its markers were the end's last source
         self.end_since = 0.0                  # and how long the limb has been lost
@@ -140,6 +127,23 @@ class LimbFiller:
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self.limits = ChainLimits(np.eye(3), c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                                   c.twists[self.joints], c.has_twist[self.joints])  # (each run's ref0 its own)
+
+    def _models(self, o: FillOptions, other_idx) -> tuple[BodyModel | None, BodyModel | None]:
+        """The body model: a lone lost elbow or knee turned on its circle towards where a regression from the rest
+        of the located body puts it (mocap_core.body_model). The end model: a limb lost from its first joint down
+        (elbow, wrist and hand; knee, ankle and foot) has its end put where the same kind of regression puts it,
+        learned from the wrist's (ankle's) place from the shoulder (hip); the joints between then aim at it
+        (Algorithm 1 held the limb as it was relative to its parent). Both learn from the other limb too, so
+        the torso has neither."""
+        names = LIMB_CHAINS[self.limb]
+        middle = [k for k, name in enumerate(names) if name in MODELLED]
+        ends = [k for k, name in enumerate(names) if name in MODELLED_ENDS]
+        if other_idx is None or not middle:
+            return None, None
+        body = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) if o.body_model else None
+        end = BodyModel(self.joints, other_idx, ends[0], self.parent_of_root, root=middle[0] - 1) \
+            if o.end_model and ends else None
+        return body, end
 
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray,
              time_s: float = float("nan")) -> FillStats:

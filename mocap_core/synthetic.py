@@ -46,7 +46,18 @@ def _pose(t: float):
     lean = math.radians(8)
     up_t = np.array([math.sin(lean), 0.0, math.cos(lean)])                          # trunk axis
     joints, m = {}, {}
-    # pelvis markers; the hip centres follow Harrington et al. from them (as the truth, by construction)
+    _pelvis(p, joints, m)
+    _trunk(p, up_t, joints, m)
+    for s, S, sgn, phase in (("l", "L", 1.0, 0.0), ("r", "R", -1.0, math.pi)):
+        ph = w * t + phase
+        _leg(s, sgn, ph, joints, m)
+        _arm(s, sgn, ph, p + 0.53 * up_t, joints, m)
+    behind = {s: math.sin(w * t + ph0) > 0.5 for s, ph0 in (("L", 0.0), ("R", math.pi))}  # arm swung back
+    return joints, m, behind
+
+
+def _pelvis(p, joints, m) -> None:
+    """The pelvis markers; the hip centres follow Harrington et al. from them (as the truth, by construction)."""
     m["SACR"] = p + np.array([-0.15, 0, 0.06])
     m["L_IAS"], m["R_IAS"] = p + np.array([0.03, 0.12, 0.07]), p + np.array([0.03, -0.12, 0.07])
     mid = 0.5 * (m["L_IAS"] + m["R_IAS"])
@@ -58,7 +69,9 @@ def _pose(t: float):
     for s, sgn in (("l", 1.0), ("r", -1.0)):
         joints[f"hip_{s}"] = mid + np.array([0, sgn * lat, 0]) + down_back
     joints["pelvis"] = 0.5 * (joints["hip_l"] + joints["hip_r"])
-    # trunk and head
+
+
+def _trunk(p, up_t, joints, m) -> None:
     m["TV12"] = p + 0.30 * up_t + np.array([-0.12, 0, 0])
     m["TV2"] = p + 0.56 * up_t + np.array([-0.10, 0, 0])
     m["SME"] = p + 0.52 * up_t + np.array([0.08, 0, 0])
@@ -66,47 +79,50 @@ def _pose(t: float):
     m["SGL"] = head + np.array([0.09, 0, 0])
     m["L_HEAD"], m["R_HEAD"] = head + np.array([0, 0.08, 0]), head + np.array([0, -0.08, 0])
     joints["head"] = head
-    for s, S, sgn, phase in (("l", "L", 1.0, 0.0), ("r", "R", -1.0, math.pi)):
-        side = np.array([0, sgn, 0])
-        # leg: running flexion pattern
-        ph = w * t + phase
-        hip_flex = math.radians(20 + 28 * math.sin(ph))
-        knee_flex = math.radians(45 + 40 * math.sin(ph - 1.2))
-        ankle = math.radians(8 * math.sin(ph + 0.6))
-        hip = joints[f"hip_{s}"]
-        knee = hip + THIGH * _down(hip_flex)
-        shank_dir = _down(hip_flex - knee_flex)
-        ank = knee + SHANK * shank_dir
-        foot_rot = _ry(-(hip_flex - knee_flex) + ankle)
-        joints[f"knee_{s}"], joints[f"ankle_{s}"] = knee, ank
-        shank_fwd = np.cross(side * sgn, shank_dir) * -1  # forward, perpendicular to the shank
-        shank_fwd /= np.linalg.norm(shank_fwd)
-        m[f"{S}_FLE"] = knee + 0.057 * side
-        m[f"{S}_TTC"] = knee + 0.045 * shank_fwd + 0.07 * shank_dir
-        m[f"{S}_PAS"] = knee + 0.05 * shank_fwd - 0.07 * shank_dir
-        m[f"{S}_FAL"] = ank + 0.042 * side
-        m[f"{S}_FCC"] = ank + foot_rot @ np.array([-0.07, 0, -0.05])
-        m[f"{S}_FM2"] = ank + foot_rot @ np.array([0.15, 0, -0.06])
-        joints[f"toe_{s}"] = m[f"{S}_FM2"]
-        # arm: swings opposite to the same side's leg, elbow bent
-        sh_flex = math.radians(-35 * math.sin(ph))
-        el_flex = math.radians(90 + 15 * math.sin(ph + 0.5))
-        sae = p + 0.53 * up_t + np.array([-0.02, sgn * 0.19, 0])
-        shoulder = sae + np.array([0, -sgn * 0.01, -0.05])
-        elbow = shoulder + UPPER_ARM * _down(sh_flex)
-        fore = _down(sh_flex + el_flex)
-        wrist = elbow + FOREARM * fore
-        joints[f"shoulder_{s}"], joints[f"elbow_{s}"], joints[f"wrist_{s}"] = shoulder, elbow, wrist
-        radial = np.cross(fore, np.array([0, 1.0, 0]))  # thumbs up while running
-        radial /= np.linalg.norm(radial)
-        m[f"{S}_SAE"] = sae
-        m[f"{S}_HLE"], m[f"{S}_HME"] = elbow + 0.035 * side, elbow - 0.035 * side
-        m[f"{S}_UOA"] = elbow - 0.03 * fore + 0.02 * np.cross(side, fore)
-        m[f"{S}_RSP"], m[f"{S}_USP"] = wrist + 0.025 * radial, wrist - 0.025 * radial
-        m[f"{S}_HM2"] = wrist + 0.08 * fore
-        joints[f"hand_{s}"] = m[f"{S}_HM2"]
-    behind = {s: math.sin(w * t + ph0) > 0.5 for s, ph0 in (("L", 0.0), ("R", math.pi))}  # arm swung back
-    return joints, m, behind
+
+
+def _leg(s: str, sgn: float, ph: float, joints, m) -> None:
+    """One leg in a running flexion pattern at phase ph."""
+    S, side = s.upper(), np.array([0, sgn, 0])
+    hip_flex = math.radians(20 + 28 * math.sin(ph))
+    knee_flex = math.radians(45 + 40 * math.sin(ph - 1.2))
+    ankle = math.radians(8 * math.sin(ph + 0.6))
+    hip = joints[f"hip_{s}"]
+    knee = hip + THIGH * _down(hip_flex)
+    shank_dir = _down(hip_flex - knee_flex)
+    ank = knee + SHANK * shank_dir
+    foot_rot = _ry(-(hip_flex - knee_flex) + ankle)
+    joints[f"knee_{s}"], joints[f"ankle_{s}"] = knee, ank
+    shank_fwd = np.cross(side * sgn, shank_dir) * -1  # forward, perpendicular to the shank
+    shank_fwd /= np.linalg.norm(shank_fwd)
+    m[f"{S}_FLE"] = knee + 0.057 * side
+    m[f"{S}_TTC"] = knee + 0.045 * shank_fwd + 0.07 * shank_dir
+    m[f"{S}_PAS"] = knee + 0.05 * shank_fwd - 0.07 * shank_dir
+    m[f"{S}_FAL"] = ank + 0.042 * side
+    m[f"{S}_FCC"] = ank + foot_rot @ np.array([-0.07, 0, -0.05])
+    m[f"{S}_FM2"] = ank + foot_rot @ np.array([0.15, 0, -0.06])
+    joints[f"toe_{s}"] = m[f"{S}_FM2"]
+
+
+def _arm(s: str, sgn: float, ph: float, chest, joints, m) -> None:
+    """One arm swinging opposite to the same side's leg, elbow bent; ``chest``: the trunk at shoulder height."""
+    S, side = s.upper(), np.array([0, sgn, 0])
+    sh_flex = math.radians(-35 * math.sin(ph))
+    el_flex = math.radians(90 + 15 * math.sin(ph + 0.5))
+    sae = chest + np.array([-0.02, sgn * 0.19, 0])
+    shoulder = sae + np.array([0, -sgn * 0.01, -0.05])
+    elbow = shoulder + UPPER_ARM * _down(sh_flex)
+    fore = _down(sh_flex + el_flex)
+    wrist = elbow + FOREARM * fore
+    joints[f"shoulder_{s}"], joints[f"elbow_{s}"], joints[f"wrist_{s}"] = shoulder, elbow, wrist
+    radial = np.cross(fore, np.array([0, 1.0, 0]))  # thumbs up while running
+    radial /= np.linalg.norm(radial)
+    m[f"{S}_SAE"] = sae
+    m[f"{S}_HLE"], m[f"{S}_HME"] = elbow + 0.035 * side, elbow - 0.035 * side
+    m[f"{S}_UOA"] = elbow - 0.03 * fore + 0.02 * np.cross(side, fore)
+    m[f"{S}_RSP"], m[f"{S}_USP"] = wrist + 0.025 * radial, wrist - 0.025 * radial
+    m[f"{S}_HM2"] = wrist + 0.08 * fore
+    joints[f"hand_{s}"] = m[f"{S}_HM2"]
 
 
 def running_take(seconds: float = 20.0, rate_hz: float = 200.0, seed: int = 0):

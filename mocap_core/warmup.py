@@ -49,69 +49,87 @@ def ensure_compiled(log) -> bool:
 
 def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
-    pair guard, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic
-    fills of the studio options)."""
+    pair guard, the fit, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with
+    the analytic fills of the studio options)."""
+    warm = {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
+            "fit": _warm_fit, "localization": _warm_localization}.get(part)
+    if warm is not None:
+        warm()
+    else:
+        _warm_solver(part)
+
+
+def _warm_rebuild() -> None:
+    from mocap_core.leg_hinge import LegHinge
+    from mocap_core.partial_means import PartialMeans
+    from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
+    from mocap_core.segment_rebuild import SegmentRebuilder
+
+    rng = np.random.default_rng(0)
+    rebuilder = SegmentRebuilder(("L_upper_arm",))
+    lm, upper = rng.normal(size=(len(LANDMARKS), 3)), rng.normal(size=(1, 3))
+    rebuilder.fill(lm.copy(), upper)
+    lm[LANDMARK_INDEX["L_HLE"]] = np.nan  # rebuilt: Kabsch and the distances (LAPACK's first calls) run now
+    rebuilder.fill(lm, upper)
+    hinge, lm = LegHinge(("L_shank",)), rng.normal(size=(len(LANDMARKS), 3))  # (the rebuild's second part)
+    hinge.fill(lm.copy(), upper)
+    lm[[LANDMARK_INDEX[f"L_{name}"] for name in ("FLE", "FME", "FAL")]] = np.nan  # put, one malleolus kept
+    hinge.fill(lm, upper)
+    lm = rng.normal(size=(len(LANDMARKS), 3))
+    lm[LANDMARK_INDEX["L_FAL"]] = np.nan
+    hinge.fill(lm, upper)
+    profile = load_profile("qualisys_sports")  # (the third: landmarks that are means; SACR is one there)
+    labels = sorted({n for landmark in profile.landmarks for n in profile.markers_of(landmark)})
+    means = PartialMeans(profile.resolve(labels))
+    markers = rng.normal(size=(len(labels), 3))
+    means.fill(markers, np.full((len(LANDMARKS), 3), np.nan))
+
+
+def _warm_pose_memory() -> None:  # one call compiles the whole kernel, recall included
+    from mocap_core.pose_memory import PoseMemory
+    from mocap_core.profiles import LANDMARKS
+
+    lm = np.random.default_rng(0).normal(size=(len(LANDMARKS), 3))
+    PoseMemory(["SACR", "L_IAS", "R_IAS", "L_FM2", "L_FLE"]).fill(lm)
+
+
+def _warm_pair_guard() -> None:
+    from mocap_core.pair_guard import PairGuard
+    from mocap_core.profiles import LANDMARKS
+
+    PairGuard().fill(np.random.default_rng(0).normal(size=(len(LANDMARKS), 3)))
+
+
+def _warm_fit() -> None:  # the rigid-skeleton fit: a start, then a frame warm-started from it
+    from mocap_core.fit.fitter import SkeletonFitter
+    from mocap_core.fit.subject import Subject
+    from mocap_core.skeleton import N_JOINTS
+
+    offsets = np.tile([0.0, 0.1, 0.0], (N_JOINTS, 1))
+    markers = np.eye(3) * 0.1
+    subject = Subject("warm_up", offsets, np.ones(N_JOINTS, bool), ["a", "b", "c"], np.zeros(3, np.int64),
+                      markers, np.zeros(3))
+    fitter = SkeletonFitter(subject, ["a", "b", "c"])
+    fitter.fit(markers)
+    fitter.fit(markers)
+
+
+def _warm_localization() -> None:
+    from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
+    from mocap_core.localization import Localizer
+    from mocap_core.profiles import LANDMARKS
+    from mocap_core.skeleton import N_JOINTS
+
+    Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
+    quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
+
+
+def _warm_solver(part: str) -> None:
     from mocap_core.body_model import MIN_SAMPLES
     from mocap_core.fill_options import STUDIO, FillOptions
     from mocap_core.gapfill import LimbFiller
-    from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
-    from mocap_core.localization import Localizer
-    from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
     from mocap_core.skeleton import N_JOINTS, Status
 
-    if part == "rebuild":
-        from mocap_core.segment_rebuild import SegmentRebuilder
-
-        rng = np.random.default_rng(0)
-        rebuilder = SegmentRebuilder(("L_upper_arm",))
-        lm, upper = rng.normal(size=(len(LANDMARKS), 3)), rng.normal(size=(1, 3))
-        rebuilder.fill(lm.copy(), upper)
-        lm[LANDMARK_INDEX["L_HLE"]] = np.nan  # rebuilt: Kabsch and the distances (LAPACK's first calls) run now
-        rebuilder.fill(lm, upper)
-        from mocap_core.leg_hinge import LegHinge  # (the rebuild's second part)
-
-        hinge, lm = LegHinge(("L_shank",)), rng.normal(size=(len(LANDMARKS), 3))
-        hinge.fill(lm.copy(), upper)
-        lm[[LANDMARK_INDEX[f"L_{name}"] for name in ("FLE", "FME", "FAL")]] = np.nan  # put, one malleolus kept
-        hinge.fill(lm, upper)
-        lm = rng.normal(size=(len(LANDMARKS), 3))
-        lm[LANDMARK_INDEX["L_FAL"]] = np.nan
-        hinge.fill(lm, upper)
-        from mocap_core.partial_means import PartialMeans  # (the rebuild's third: landmarks that are means)
-        from mocap_core.profiles import load_profile
-
-        profile = load_profile("qualisys_sports")  # SACR is a mean of two markers there
-        labels = sorted({n for landmark in profile.landmarks for n in profile.markers_of(landmark)})
-        means = PartialMeans(profile.resolve(labels))
-        markers = rng.normal(size=(len(labels), 3))
-        means.fill(markers, np.full((len(LANDMARKS), 3), np.nan))
-        return
-    if part == "pose_memory":  # one call compiles the whole kernel, recall included
-        from mocap_core.pose_memory import PoseMemory
-
-        lm = np.random.default_rng(0).normal(size=(len(LANDMARKS), 3))
-        PoseMemory(["SACR", "L_IAS", "R_IAS", "L_FM2", "L_FLE"]).fill(lm)
-        return
-    if part == "pair_guard":
-        from mocap_core.pair_guard import PairGuard
-
-        PairGuard().fill(np.random.default_rng(0).normal(size=(len(LANDMARKS), 3)))
-        return
-    if part == "fit":  # the rigid-skeleton fit: a start, then a frame warm-started from it
-        from mocap_core.fit.fitter import SkeletonFitter
-        from mocap_core.fit.subject import Subject
-        offsets = np.tile([0.0, 0.1, 0.0], (N_JOINTS, 1))
-        markers = np.eye(3) * 0.1
-        subject = Subject("warm_up", offsets, np.ones(N_JOINTS, bool), ["a", "b", "c"], np.zeros(3, np.int64),
-                          markers, np.zeros(3))
-        fitter = SkeletonFitter(subject, ["a", "b", "c"])
-        fitter.fit(markers)
-        fitter.fit(markers)
-        return
-    if part == "localization":
-        Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
-        quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
-        return
     solver, options = ("ccd", STUDIO) if part == "beyond" else (part, FillOptions())
     filler = LimbFiller("left_leg", solver, options=options)
     pos = np.zeros((N_JOINTS, 3))
