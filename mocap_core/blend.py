@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -52,6 +53,48 @@ MAX_APART_M = 0.5
 # BlendState.trust's columns: |acceleration| summed while located and how many; the output's squared misses
 # where the markers came back and how many; frames located in a row.
 ACC_SUM, ACC_N, MISS_SQ, MISS_N, LOCATED_RUN = range(5)
+
+
+class BlendMemory(NamedTuple):
+    """What blend_transitions keeps per joint between frames: BlendState's arrays, as the kernels take them."""
+    last_out: np.ndarray      # (n, 3) the last output
+    out_step: np.ndarray      # (n, 3) and its last step
+    last_raw: np.ndarray      # (n, 3) the source's last position, before the offset
+    raw_vel: np.ndarray       # (n, 3) and its last step
+    seen_raw: np.ndarray      # (n, 2, 3) where each kind of source (0 markers, 1 a fill) was last seen
+    seen_age: np.ndarray      # (n, 2) and how many frames ago
+    last_status: np.ndarray   # (n,)
+    has_last: np.ndarray      # (1,) bool
+    offset: np.ndarray        # (n, 3) the spring's offset
+    offset_vel: np.ndarray    # (n, 3) and its velocity
+    course: np.ndarray        # (n, 3) where the markers' course leads, since they were lost
+    course_step: np.ndarray   # (n, 3) and its step
+    since_loss: np.ndarray    # (n,) seconds since the markers were lost (inf: no loss being eased)
+    eased: np.ndarray         # (n,) and how far it has gone from that course towards the fill (0-1)
+    trust: np.ndarray         # (n, 5) what course_weight learns from (columns ACC_SUM ... LOCATED_RUN)
+    prev_raw: np.ndarray      # (n, 3) the source's position a frame before last_raw
+    prev_vel: np.ndarray      # (n, 3) and its step then
+    course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
+    held_course: np.ndarray   # (n,) bool: that course began where an estimate was given up for a hold
+    course_base: np.ndarray   # (n, 3) the parent's step that course_step moves with (parent alone located)
+
+
+class BlendSettings(NamedTuple):
+    step: float       # reacquire_step_m: how far the blend may move the output off its source in a frame
+    omega: float      # the spring's, from blend_half_life_s
+    dt: float         # seconds since the last frame
+    course_on: bool   # blend_course
+
+
+class Change(NamedTuple):
+    """How a joint's source changed this frame (_spring_blend)."""
+    lost: bool            # markers lost
+    gave_up: bool         # an estimate given up for a hold: met like a loss
+    found_or_lost: bool   # markers lost or back
+    jumped: bool          # a fill faster than any joint moves: another source
+    spike: bool           # a fill out for one frame and back on its way
+    handed: bool          # handed from one fill to another without such a jump
+    back: bool            # an estimate back from a hold, on a course
 
 
 @dataclass
@@ -108,14 +151,15 @@ class BlendState:
     def blend(self, positions, status, idx, frames=None) -> None:
         """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone
         frames, are blended too where given (blend_frames, with the spring's half-life)."""
+        # (the kernels take the arrays one by one: numba reads a tuple of twenty arrays ~5 us slower per call)
         if frames is not None and self.omega > 0:  # (before blend_transitions, which moves last_status on)
             blend_frames(frames, status, idx, self.last_status, self.has_last, self.last_frame, self.turn_axis,
                          self.turn, self.omega, self.frame_s)
         blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
                           self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
-                          self.course, self.course_step, self.since_loss, self.eased, self.trust, self.step, self.omega,
-                          self.frame_s, self.course_on, self.prev_raw, self.prev_vel, self.course_len,
-                          self.held_course, self.course_base)
+                          self.course, self.course_step, self.since_loss, self.eased, self.trust, self.prev_raw,
+                          self.prev_vel, self.course_len, self.held_course, self.course_base, self.step, self.omega,
+                          self.frame_s, self.course_on)
 
 
 @njit(cache=True)
@@ -177,79 +221,91 @@ def _take_step(velocity, step, last_step, limit):
         velocity[:] = step
 
 
-@njit(cache=True)
-def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset, offset_vel,
-                  course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on, prev_raw, prev_vel,
-                  course_len, held_course, course_base, neighbours):
-    """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
-    a loss, eased from the markers' course into that (see blend_transitions). ``neighbours``: the joints
-    before and after it in the chain, where both are located, or its parent, where that alone is (else NaN)."""
-    kind = 0 if s == LOCATED else 1
-    raw = p.copy()
-    heading = last_raw[k] + raw_vel[k]  # where the source was heading
-    before_raw = last_raw[k].copy()  # (the next frame's prev_raw / prev_vel, for its spike test)
-    before_step = raw_vel[k].copy()  # (also the markers' last step, at a loss; the estimate's, given up)
+@njit(cache=True, inline="always")
+def _change(raw, heading, s, was, k, mem, dt):
+    """Classify the source's change (Change) and learn from it what course_weight needs."""
+    since_loss, trust, last_raw, prev_raw, prev_vel = mem.since_loss, mem.trust, mem.last_raw, mem.prev_raw, mem.prev_vel
     lost = s != LOCATED and was == LOCATED
-    # an estimate given up for a hold, which knows nothing of where the joint went, is met like a loss: the
-    # output goes on along the estimate's course; a course running goes on
     gave_up = s == HELD and was == ESTIMATED and since_loss[k] == math.inf
     found_or_lost = (s == LOCATED) != (was == LOCATED)
     jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
-    # a fill that stepped out for one frame, under the jump's threshold, and is back where it was heading
-    # before that: not a jump, and the output goes on at the step it had before the spike
     spike = jumped and s == was and vnorm(raw - (prev_raw[k] + 2.0 * prev_vel[k])) <= SOURCE_JUMP_M_S * dt
     jumped = jumped and not spike
-    # handed from one fill to another (estimated, held) without such a jump: the new fill's jump is taken into
-    # the offset too (the Vicon take's right wrist, handed from held to estimated at frame 979, moved 73 mm in
-    # that frame, 2.11x its normal step; 0.31x with it). A course goes on through a hold; an estimate back
-    # from one ends it, and the output goes on from itself at its own step into the estimate, as into
-    # returning markers (the Vicon take's left elbow stayed on a stale course for 0.3 s: 107 -> 106 mm)
+    # handed from one fill to another (estimated, held) without such a jump: the new fill's jump goes into the
+    # offset too. A course goes on through a hold; an estimate back from one ends it, and the output goes on
+    # from itself at its own step into the estimate, as into returning markers
     handed = s != LOCATED and was != LOCATED and was != MISSING and s != was and not jumped
-    spring_moved = 0.0
-    limit = step  # how far the blend may move the output off its source this frame
     trust[k, LOCATED_RUN] = trust[k, LOCATED_RUN] + 1 if s == LOCATED else 0
     if trust[k, LOCATED_RUN] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two markers' steps
         trust[k, ACC_SUM] += vnorm(raw - heading) / (dt * dt)  # |acceleration|
         trust[k, ACC_N] += 1
     if s == LOCATED and was != LOCATED and was != MISSING:  # how far the output's course missed the markers
-        miss = vnorm(raw - (heading + offset[k]))
+        miss = vnorm(raw - (heading + mem.offset[k]))
         trust[k, MISS_SQ] += miss * miss
         trust[k, MISS_N] += 1
-    back = handed and was == HELD and since_loss[k] < math.inf  # an estimate back from a hold, on a course
-    if spike:  # (ending a course, as a jump does)
-        offset[k] = last_out[k] + prev_vel[k] - raw
-        offset_vel[k] = 0.0
+    back = handed and was == HELD and since_loss[k] < math.inf
+    return Change(lost, gave_up, found_or_lost, jumped, spike, handed, back)
+
+
+@njit(cache=True, inline="always")
+def _new_offset(raw, heading, s, was, k, mem, cfg, c):
+    """The offset where the source changed: the new source less where the old was heading, so the output goes on
+    as it went; eased from rest."""
+    offset, offset_vel, since_loss, raw_vel, seen_age = mem.offset, mem.offset_vel, mem.since_loss, mem.raw_vel, \
+        mem.seen_age
+    step, dt = cfg.step, cfg.dt
+    kind = 0 if s == LOCATED else 1
+    if since_loss[k] < math.inf:
+        # the output left the spring's course for the markers': go on from it, at its own last step (a recall's
+        # step can be jitter)
+        offset[k] = mem.last_out[k] + mem.out_step[k] - heading
         since_loss[k] = math.inf
+    offset[k] -= raw - heading
+    since = seen_age[k, kind]  # frames since this kind of source was last seen
+    across = (raw - mem.seen_raw[k, kind]) / since  # and its step since then
+    if s == LOCATED and since <= FLICKER_FRAMES and vnorm(across) <= SOURCE_JUMP_M_S * dt:
+        # markers back after a flicker: their step across it is measured, and the output goes on at that, not at
+        # its own step along the course (which, through a fast swing, comes back well off the markers)
+        offset[k] = mem.last_out[k] + across - raw
+    offset_vel[k] = 0.0  # a new offset, eased from rest
+    if c.jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and vnorm(offset[k]) > 0:
+        # an estimate that jumps within itself has corrected itself (a rebuild whose partners changed), where a
+        # held joint that jumps was taken up by another bone: its offset starts closing at once, at the step cap
+        offset_vel[k] = offset[k] * (-step / dt / vnorm(offset[k]))
+    if c.found_or_lost and since <= FLICKER_FRAMES:
+        _take_step(raw_vel[k], across, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
+    elif c.jumped:  # the new source's step is unknown: the old one kept would make every next frame a jump too
+        raw_vel[k] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _spring_blend(p, s, was, k, mem, cfg, decay, neighbours):
+    """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
+    a loss, eased from the markers' course into that (see blend_transitions). ``neighbours``: the joints
+    before and after it in the chain, where both are located, or its parent, where that alone is (else NaN)."""
+    offset, offset_vel, last_raw, raw_vel, prev_raw, prev_vel = mem.offset, mem.offset_vel, mem.last_raw, \
+        mem.raw_vel, mem.prev_raw, mem.prev_vel
+    step, omega, dt = cfg.step, cfg.omega, cfg.dt
+    kind = 0 if s == LOCATED else 1
+    raw = p.copy()
+    heading = last_raw[k] + raw_vel[k]  # where the source was heading
+    before_raw = last_raw[k].copy()  # (the next frame's prev_raw / prev_vel, for its spike test)
+    before_step = raw_vel[k].copy()  # (also the markers' last step, at a loss; the estimate's, given up)
+    c = _change(raw, heading, s, was, k, mem, dt)
+    spring_moved = 0.0
+    limit = step  # how far the blend may move the output off its source this frame
+    if c.spike:  # (ending a course, as a jump does)
+        offset[k] = mem.last_out[k] + prev_vel[k] - raw
+        offset_vel[k] = 0.0
+        mem.since_loss[k] = math.inf
         raw_vel[k] = (raw - prev_raw[k]) * 0.5
-    if handed and not back:
+    if c.handed and not c.back:
         offset[k] -= raw - heading
         offset_vel[k] = 0.0
-    if was != MISSING and (found_or_lost or jumped or back):
-        if since_loss[k] < math.inf:
-            # the output left the spring's course for the markers': go on from it, at its own last step (the
-            # fill's can be a recall's jitter: on dance1's knee 31 mm a frame where the leg moved 10)
-            offset[k] = last_out[k] + out_step[k] - heading
-            since_loss[k] = math.inf
-        offset[k] -= raw - heading
-        since = seen_age[k, kind]  # frames since this kind of source was last seen
-        across = (raw - seen_raw[k, kind]) / since  # and its step since then
-        if s == LOCATED and since <= FLICKER_FRAMES and vnorm(across) <= SOURCE_JUMP_M_S * dt:
-            # markers back after a flicker: their step across it is measured, and the output goes on at that, not at
-            # its own step along the course (which, through a fast swing, comes back well off the markers)
-            offset[k] = last_out[k] + across - raw
-        offset_vel[k] = 0.0  # a new offset, eased from rest
-        if jumped and s == ESTIMATED and was == ESTIMATED and step > 0 and vnorm(offset[k]) > 0:
-            # an estimate that jumps within itself has corrected itself (a rebuild whose partners changed), where a
-            # held joint that jumps was taken up by another bone: its offset starts closing at once, at the step
-            # cap's pace. Eased from rest, the Vicon take's left elbow went on 103 mm off for 0.1 s after its
-            # rebuild had come back to 4 mm in a 4-5 m/s swing
-            offset_vel[k] = offset[k] * (-step / dt / vnorm(offset[k]))
-        if found_or_lost and since <= FLICKER_FRAMES:
-            _take_step(raw_vel[k], across, raw_vel[k].copy(), SOURCE_JUMP_M_S * dt)
-        elif jumped:  # the new source's step is unknown: the old one kept made every next frame a jump too,
-            raw_vel[k] = 0.0  # each taken into the offset
+    if was != MISSING and (c.found_or_lost or c.jumped or c.back):
+        _new_offset(raw, heading, s, was, k, mem, cfg, c)
     else:
-        if was != MISSING and not handed and not spike:  # (a hand-over's jump is not the source's step)
+        if was != MISSING and not c.handed and not c.spike:  # (a hand-over's jump is not the source's step)
             _take_step(raw_vel[k], raw - last_raw[k], last_raw[k] - prev_raw[k], SOURCE_JUMP_M_S * dt)
         limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
         before = offset[k].copy()
@@ -261,85 +317,103 @@ def _spring_blend(p, s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw,
     last_raw[k] = raw
     prev_raw[k] = before_raw
     prev_vel[k] = before_step
-    seen_raw[k, kind] = raw
-    seen_age[k, kind] = 0
+    mem.seen_raw[k, kind] = raw
+    mem.seen_age[k, kind] = 0
     p += offset[k]
-    if (lost or gave_up) and course_on and trust[k, ACC_N] > 0:
-        course[k], course_step[k], since_loss[k], eased[k] = p, before_step, 0.0, 0.0
-        held_course[k] = gave_up
-        course_len[k, 0] = vnorm(p - neighbours[0])  # (NaN unless both are located, or the parent alone)
-        course_len[k, 1] = vnorm(neighbours[1] - p)
-        course_base[k] = 0.0  # (the parent's step that course_step carries, where the parent alone is located)
-        if k > 0:
-            course_base[k] = out_step[k - 1]
-    elif since_loss[k] < math.inf:
-        since_loss[k] += dt
-        course[k] += course_step[k]
-        carried = False
-        # a lone joint's course keeps its distances to its located neighbours, turning with them (an elbow swings
-        # about the shoulder; its markers' straight course flies off the arm). Once one is lost it goes on
-        # straight from where it is. Neighbours out
-        # of reach of those distances (skin that slid) leave a circle shrunk to a point on their line, which is not
-        # where the joint went. There the course moves with their line, as it
-        # lay against it the frame before. Going on straight and pulled towards the line by at most the
-        # step cap, the Vicon take's kicking right foot, out of its ankle's and toe's reach for 9 frames as the kick
-        # turned back, ran 200 mm ahead and then fell onto the circle in one frame: its markers came back at up to
-        # 1.50x its own pace (1.15x now). A joint lost while its parent alone is located (an end joint, a hand or a
-        # toe; or one whose child is lost too) keeps its distance to the parent, as the lone joint does to both (stop
-        # 44): the Vicon take's left hand, lost for 9 frames at 318 while the arm swung, fell 290 mm behind its fill
-        # on its markers' straight course, and was still 283 mm off its markers after they came back (151 so). Not
-        # where the parent is the limb's root (the hip, the clavicle), which the trunk's skin markers put: the knee's
-        # move where its markers went, lost with its ankle on short gaps, went 0.69 -> 1.04x its normal step on
-        # dance2, over the spring alone's 1.01x, as the hip joint shook its sphere. That course also moves with the
-        # parent: its step is its markers' last step relative to the parent's then, plus the parent's now. A
-        # course begun with the parent lost
-        # too is carried once the parent is located again, at its distance then (the left hand, lost with its wrist
-        # for a frame at 172 and a frame longer itself: 57 -> 53); never the root's child (k 1), whose neighbours are
-        # both given where both are located.
-        if all_finite(course_len[k]) and all_finite(neighbours):
-            if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
-                course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],
-                                              course_len[k, 1])
-            elif all_finite(last_out[k - 1]) and all_finite(last_out[k + 1]):
-                rot, shift = line_carry(last_out[k - 1], last_out[k + 1], neighbours[0], neighbours[1])
-                course[k] = mv(rot, course[k] - course_step[k]) + shift
-        elif k > 1 and np.isnan(course_len[k, 1]) and all_finite(neighbours[0]) and all_finite(last_out[k - 1]):
-            change = neighbours[0] - last_out[k - 1] - course_base[k]  # (the parent's step, less the one carried)
-            course[k] += change
-            course_step[k] += change
-            course_base[k] += change
-            carried = True
-            if np.isnan(course_len[k, 0]):  # (the parent located again: from here on)
-                course_len[k, 0] = vnorm(course[k] - neighbours[0])
-            course[k] = nearest_on_sphere(course[k], neighbours[0], course_len[k, 0])
-        else:
-            course_len[k] = np.nan
-        if held_course[k]:  # (a hold's course: its step dies out, HOLD_COURSE_S; relative to a parent that carries it)
-            fade = math.exp(-dt / HOLD_COURSE_S)
-            if carried:
-                course_step[k] = course_base[k] + (course_step[k] - course_base[k]) * fade
-            else:
-                course_step[k] *= fade
-        w = course_weight(since_loss[k], trust[k])
-        w = 1.0 if w >= EASED else w
-        apart = vnorm(p - course[k])
-        if step > 0 and (w - eased[k]) * apart > limit - spring_moved:  # one cap on the two together
-            w = eased[k] + max(limit - spring_moved, 0.0) / apart
-        eased[k] = min(w, 1.0)
-        p[:] = course[k] + eased[k] * (p - course[k])
-        if eased[k] == 1.0:
-            since_loss[k] = math.inf
+    if (c.lost or c.gave_up) and cfg.course_on and mem.trust[k, ACC_N] > 0:
+        _start_course(p, k, mem, neighbours, c.gave_up, before_step)
+    elif mem.since_loss[k] < math.inf:
+        _follow_course(p, k, mem, cfg, neighbours, limit - spring_moved)
     # a fill further off than that where it takes over is met as ever; from there on the output only may not
-    # drift further from it (clamping the frame it took over moved a karate ankle 84 mm, 2.5x its normal step)
-    if s != LOCATED and was != LOCATED and was != MISSING and not (gave_up or jumped or handed or spike):
-        apart = vnorm(p - raw)
-        reach = max(MAX_APART_M, vnorm(last_out[k] - before_raw))
-        if apart > reach:  # (the course and the offset go on from there)
-            p[:] = raw + (p - raw) * (reach / apart)
-            offset[k] = p - raw
-            offset_vel[k] = 0.0
-            if since_loss[k] < math.inf:
-                course[k] = p
+    # drift further from it
+    if s != LOCATED and was != LOCATED and was != MISSING and not (c.gave_up or c.jumped or c.handed or c.spike):
+        _keep_near(p, raw, k, mem, max(MAX_APART_M, vnorm(mem.last_out[k] - before_raw)))
+
+
+@njit(cache=True, inline="always")
+def _start_course(p, k, mem, neighbours, held, step):
+    """The markers (or an estimate given up for a hold, ``held``) lost: the output goes on along their last
+    ``step``."""
+    mem.course[k], mem.course_step[k], mem.since_loss[k], mem.eased[k] = p, step, 0.0, 0.0
+    mem.held_course[k] = held
+    mem.course_len[k, 0] = vnorm(p - neighbours[0])  # (NaN unless both are located, or the parent alone)
+    mem.course_len[k, 1] = vnorm(neighbours[1] - p)
+    mem.course_base[k] = 0.0  # (the parent's step that course_step carries, where the parent alone is located)
+    if k > 0:
+        mem.course_base[k] = mem.out_step[k - 1]
+
+
+@njit(cache=True, inline="always")
+def _follow_course(p, k, mem, cfg, neighbours, room):
+    """One frame further along the course after a loss, and as far towards the fill as course_weight says, the
+    move at most ``room`` (what the step cap leaves of this frame's)."""
+    course, course_step, course_len, course_base, last_out = mem.course, mem.course_step, mem.course_len, \
+        mem.course_base, mem.last_out
+    mem.since_loss[k] += cfg.dt
+    course[k] += course_step[k]
+    carried = False
+    # A lone joint's course keeps its distances to its located neighbours, turning with them (an elbow swings
+    # about the shoulder; its markers' straight course flies off the arm); once one is lost it goes on straight
+    # from where it is. Neighbours out of reach of those distances (skin that slid) leave a circle shrunk to a
+    # point on their line: there the course moves with their line, as it lay against it the frame before. A joint
+    # lost while its parent alone is located (a hand, a toe; or one whose child is lost too) keeps its distance to
+    # the parent and moves with it: its step is its markers' last step relative to the parent's then, plus the
+    # parent's now; a course begun with the parent lost too is carried once the parent is back, at its distance
+    # then. Not where the parent is the limb's root (the hip, the clavicle), which the trunk's skin markers put and
+    # shake; never the root's child (k 1), whose neighbours are both given where both are located.
+    if all_finite(course_len[k]) and all_finite(neighbours):
+        if vnorm(neighbours[1] - neighbours[0]) <= course_len[k, 0] + course_len[k, 1]:
+            course[k] = nearest_on_circle(course[k], neighbours[0], neighbours[1], course_len[k, 0],
+                                          course_len[k, 1])
+        elif all_finite(last_out[k - 1]) and all_finite(last_out[k + 1]):
+            rot, shift = line_carry(last_out[k - 1], last_out[k + 1], neighbours[0], neighbours[1])
+            course[k] = mv(rot, course[k] - course_step[k]) + shift
+    elif k > 1 and np.isnan(course_len[k, 1]) and all_finite(neighbours[0]) and all_finite(last_out[k - 1]):
+        change = neighbours[0] - last_out[k - 1] - course_base[k]  # (the parent's step, less the one carried)
+        course[k] += change
+        course_step[k] += change
+        course_base[k] += change
+        carried = True
+        if np.isnan(course_len[k, 0]):  # (the parent located again: from here on)
+            course_len[k, 0] = vnorm(course[k] - neighbours[0])
+        course[k] = nearest_on_sphere(course[k], neighbours[0], course_len[k, 0])
+    else:
+        course_len[k] = np.nan
+    if mem.held_course[k]:  # (a hold's course: its step dies out, HOLD_COURSE_S; relative to a parent that carries it)
+        fade = math.exp(-cfg.dt / HOLD_COURSE_S)
+        if carried:
+            course_step[k] = course_base[k] + (course_step[k] - course_base[k]) * fade
+        else:
+            course_step[k] *= fade
+    _ease(p, k, mem, cfg.step, room)
+
+
+@njit(cache=True, inline="always")
+def _ease(p, k, mem, step, room):
+    """Move the output from the course towards the fill, as far as course_weight says and ``room`` allows."""
+    course, eased = mem.course, mem.eased
+    w = course_weight(mem.since_loss[k], mem.trust[k])
+    w = 1.0 if w >= EASED else w
+    apart = vnorm(p - course[k])
+    if step > 0 and (w - eased[k]) * apart > room:  # one cap on the two together
+        w = eased[k] + max(room, 0.0) / apart
+    eased[k] = min(w, 1.0)
+    p[:] = course[k] + eased[k] * (p - course[k])
+    if eased[k] == 1.0:
+        mem.since_loss[k] = math.inf
+
+
+@njit(cache=True, inline="always")
+def _keep_near(p, raw, k, mem, reach):
+    """The output no further than ``reach`` from the fill ``raw`` that stands in (the course and the offset go on
+    from there)."""
+    apart = vnorm(p - raw)
+    if apart > reach:
+        p[:] = raw + (p - raw) * (reach / apart)
+        mem.offset[k] = p - raw
+        mem.offset_vel[k] = 0.0
+        if mem.since_loss[k] < math.inf:
+            mem.course[k] = p
 
 
 @njit(cache=True)
@@ -367,8 +441,8 @@ def _linear_return(p, s, was, last, offset, step):
 
 @njit(cache=True)
 def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
-                      has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt,
-                      course_on, prev_raw, prev_vel, course_len, held_course, course_base):
+                      has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, prev_raw, prev_vel,
+                      course_len, held_course, course_base, step, omega, dt, course_on):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -401,6 +475,10 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     markers' course after a loss and how far the output has left it; ``course_len``, a lone joint's distances to
     its neighbours where the course began; ``held_course``, whether it began at a hold; ``course_base``, the
     parent's step that the course's step carries."""
+    mem = BlendMemory(last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last, offset,
+                      offset_vel, course, course_step, since_loss, eased, trust, prev_raw, prev_vel, course_len,
+                      held_course, course_base)
+    cfg = BlendSettings(step, omega, dt, course_on)
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
     neighbours = np.empty((2, 3))
@@ -426,9 +504,7 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
                 neighbours[1] = positions[idx[k + 1]]
             elif 1 < k and status[idx[k - 1]] == LOCATED:  # its parent alone (not the limb's root: _spring_blend)
                 neighbours[0] = positions[idx[k - 1]]
-            _spring_blend(positions[j], s, was, k, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, offset,
-                          offset_vel, course, course_step, since_loss, eased, trust, step, omega, dt, decay, course_on,
-                          prev_raw, prev_vel, course_len, held_course, course_base, neighbours)
+            _spring_blend(positions[j], s, was, k, mem, cfg, decay, neighbours)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):
