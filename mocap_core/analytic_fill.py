@@ -36,10 +36,8 @@ FIT_STEPS = 360     # a coarse pass over the whole circle (1 degree), then a fin
 MEMORY_SD = 0.01
 # How far a lost joint's frame turns with the plane of its two bones (shape_turn): not at all below a bend of
 # STRAIGHT_SIN (about 3 degrees), wholly from STRAIGHT_SIN + PLANE_RANGE (17 degrees). Nearly straight, the plane is
-# noise: a lost joint out of its neighbours' reach (put on their line) turned its frame about an arbitrary axis
-# (the Vicon take's left shoulder, its acromion lost, turned 130-175 degrees a frame, and the held wrist and hand
-# it carries moved 83 mm a frame), and a lone wrist bent 4-6 degrees turned 45 degrees a frame (135 degrees in 4
-# frames where its markers, seen on either side, turned 15).
+# noise: a lost joint out of its neighbours' reach (put on their line) would turn its frame about an arbitrary
+# axis, and the joints it carries with it, by up to half a turn a frame.
 STRAIGHT_SIN = 0.05
 PLANE_RANGE = 0.25
 BEND_MIN = 0.1      # a bend direction is trusted when the middle joint is off the line by 10 % of its bone

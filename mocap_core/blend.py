@@ -174,8 +174,8 @@ def spring_step(x, v, omega, dt, decay):
 def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_axis, turn, omega, dt):
     """A joint's bone frame that changes source (its or a neighbour's markers lost or back, a fill handed to
     another) goes on from the frame it had, and the turn between the two dies out as a critically damped spring
-    (the positions' blend, for the bone frames a rig streams), in place. The Vicon take's left wrist, handed
-    between its sliding markers and the swivel's fill, turned up to 174 degrees in a frame there."""
+    (the positions' blend, for the bone frames a rig streams), in place: a wrist handed between sliding markers
+    and a fill can otherwise turn half a turn in a frame."""
     decay = math.exp(-omega * dt)
     n = idx.shape[0]
     for k in range(n):
@@ -214,9 +214,8 @@ def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_ax
 def _take_step(velocity, step, last_step, limit):
     """A source's step becomes its velocity unless it is faster than any joint moves and as far off its own last
     step (a jump, or two fills of one kind that are not one source), in place. (Faster alone is not enough: a
-    kicking toe filled at 105 mm a frame, 12.6 m/s, kept a velocity of 83 mm a frame from before; its curving
-    course then left that by over the jump's threshold, every next frame was met as a jump, and the output stood
-    still for 4 frames, 400 mm behind: the Vicon take's right toe at frame 490.)"""
+    fast joint filled along a curve leaves its last step by more than the threshold frame after frame, and would
+    be met as a jump every frame, standing still.)"""
     if vnorm(step) <= limit or vnorm(step - last_step) <= limit:
         velocity[:] = step
 

@@ -3,8 +3,8 @@ the rebuild).
 
 The segment rebuild (mocap_core.segment_rebuild) carries a lost knee with its shank, but it needs two
 markers on the shank: a tracking marker on its shaft and the ankle at its end, which the foot's markers
-put. In a high kick a studio loses the foot's markers as well (the Vicon free-form take loses heel and
-metatarsals for its last second), and the knee and ankle were then held, up to 0.77 and 1.3 m off.
+put. In a high kick a studio loses the foot's markers as well, and the knee and ankle were then held, a metre
+off by the kick's end.
 
 One marker on the shank is still enough for the whole leg but one angle. The leg is two rigid bodies:
 the thigh turns about the hip joint centre and carries the knee's epicondyles, and the shank turns about
@@ -24,8 +24,8 @@ the knee from the ankle and the shank marker). The tibial tuberosity is left to 
 Where the rebuild had only those two (the shank marker and the ankle), the shank's roll about their line is
 kept from its reference frame, and the knee's epicondyles, 20 cm off that line, swing with any error in it.
 The thigh then settles it (``settle_roll``): the epicondyles are turned about that line to the roll that keeps
-them at their learned distances from the hip joint centre (the femur is rigid; the Vicon take's hold within
-6-14 mm SD over the take, Harrington's centre included).
+them at their learned distances from the hip joint centre (the femur is rigid: over a take they hold within a
+centimetre or so, Harrington's centre included).
 """
 from __future__ import annotations
 

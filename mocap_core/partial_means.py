@@ -2,14 +2,11 @@
 
 A profile may name a landmark the mean of markers (``L_SAE: mean(LFSH, LBSH)``, the acromion between the
 front and back shoulder markers). One of them lost made the whole landmark lost, and what stands in for it
-moved the body's frames: on the Vicon take LBSH flickers (50 frames in 17 runs), the chest then fell back to
-other markers and turned up to 50 degrees in a frame, its sternum-clavicle point moved 40 mm, and the left
-shoulder, estimated out of its neighbours' reach, turned 130-175 degrees. Here a lost member keeps its offset
+moved the body's frames (a flickering back-shoulder marker turned the chest tens of degrees in a frame). Here a lost member keeps its offset
 from its landmark's members still seen, as it was in the last frame in which the landmark was whole, turned as
 the markers nearest it have turned since (use what is still visible; the last turn is kept while fewer than
 three of them are seen). Anchored to the landmark's own markers, a rotation that is a little off moves it
-little; the rigid motion of the nearest markers alone, centre included, moved a kicking toe 200 mm in a frame
-when one of them came back.
+little; the rigid motion of the nearest markers alone, centre included, jumps when one of them comes back.
 """
 from __future__ import annotations
 
@@ -19,16 +16,9 @@ from numba import njit
 from mocap_core.ik.kernels import mv, nearness_weight, rigid_fit_weighted
 from mocap_core.profiles import LandmarkMap
 
-# The markers nearest a lost member (in its landmark's last whole frame) whose rotation turns its offset. On the
-# Vicon take, the back shoulder, head, pelvis, toe and hand markers hidden for 12 frames (from every 5th frame):
-# the landmark 7.8 / 3.6 / 5.7 / 2.7 / 2.1 mm off on average (max 55 / 39 / 99 / 17 / 21) with 4, where the
-# offset without a turn gave 14.5 / 5.5 / 16.2 / 5.7 / 6.2 (max 89 / 92 / 128 / 41 / 33) and the nearest
-# markers' rigid motion alone 10.1 / 3.9 / 6.3 / 2.6 / 3.2 (max 109 / 38 / 136 / 21 / 83). Hidden for 43 frames
-# (the longest real loss): 19.9 / 10.0 / 14.9 / 4.8 / 3.6 against 36.4 / 14.0 / 46.1 / 12.3 / 11.9 without a turn.
-# 5 of them, or only those within 0.2-0.3 m: worse on the toe (max 41-72 mm).
-# Each weighs by its nearness to the lost member: measured as above again,
-# 7.7 / 3.8 / 6.0 / 2.7 / 1.9 mm (max 53 / 39 / 87 / 13 / 12) -> 7.6 / 3.4 / 5.4 / 2.3 / 1.7 (max 53 / 36 / 100 /
-# 12 / 10); for 43 frames 20.5 / 10.7 / 12.5 / 5.1 / 3.2 -> 20.0 / 9.8 / 11.0 / 4.6 / 2.9.
+# The markers nearest a lost member (in its landmark's last whole frame) whose rotation turns its offset, each
+# weighed by its nearness to the member. A turn from fewer is noise; from more, or from farther ones, it follows
+# the body less closely (a toe's member moved with the leg rather than the foot).
 NEIGHBOURS = 4
 
 

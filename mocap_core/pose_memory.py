@@ -11,8 +11,7 @@ put where the remembered poses whose toe was nearest had them (inverse-distance 
 smoothed over frames, starting from the last pose seen so that nothing jumps when the markers go.
 The ankle goes as far from the toe as it was in those poses (the foot keeps it near the toe); the
 knee goes where they had it in the pelvis's frame (the thigh keeps it near the hip), moved by 30 % of
-how far the toe is from theirs (TOE_SHARE). On dance1 the knee in the pelvis's frame alone was 43 mm
-off, with 30 % of the toe's offset 28 mm.
+how far the toe is from theirs (TOE_SHARE).
 
 Where the profile names the foot's two toe markers one by one (its ``tracking`` markers of the foot:
 the dance set's big-toe and little-toe markers, whose mean is the toe), the line between them tells
@@ -104,8 +103,7 @@ VELOCITY_S = 0.4
 LOCAL_FIT_RIDGE = 0.005
 # A leg reaches no farther than it has been seen to: a recalled ankle beyond the farthest either leg's ankle has
 # been from its hip joint centre goes, on its sphere about the toe, to that distance (the pose memory's poses
-# may have had the foot flat where it is now pointed, the toe as far as the leg goes). dance1 left at 13 s:
-# the recalled ankle 783 mm from the hip, where it never was over 748; its error 120 -> 89 mm.
+# may have had the foot flat where it is now pointed, the toe as far as the leg goes).
 # ... learned so that one wrong frame cannot undo it: the reach grows by at most this a frame (a marker
 # swapped for one frame 1 m off would otherwise leave the ankle free for the rest of the take).
 REACH_GROWTH_M = 0.005

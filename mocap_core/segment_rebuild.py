@@ -113,38 +113,25 @@ TRACKING_PRIOR = 0.3
 # above is seen, a refined member is carried by the least turn of that line and then rolled about it to the angle
 # that keeps its learned distances to the bone above's tracking markers best (searched within MAX_ROLL either
 # side, in ROLL_STEP steps, then tenths and hundredths; ROLL_PRICE, square metres per square radian, holds it
-# near the reference's roll where they hardly fix it, as in the leg hinge's roll). The Vicon take's foot with
-# the heel lost keeps only its metatarsals (the toe landmark their mean), on one line; the shank's wand then
-# fixes the ankle. Knee and ankle hidden from 1 s (studio options), right leg 34 / 31 -> 31 / 24 mm (price
-# 0.0001: 32 / 24; 0.01: 32 / 25; a free Gauss-Newton on all the distances instead of the roll: 31 / 27).
-# The sprint's elbow with its olecranon hidden too (the styloids across the forearm, and the upper arm's two
-# markers): 53 -> 27 mm.
+# near the reference's roll where they hardly fix it, as in the leg hinge's roll). A foot with the heel lost keeps
+# only its metatarsals, on one line; the shank's markers then fix the ankle.
 MAX_ROLL = np.radians(90.0)
 ROLL_STEP = np.radians(5.0)
 ROLL_PRICE = 0.001
 # A forearm rolls about its shaft (pronation: up to 150 deg), a shank hardly does. So where two partners along
 # the forearm are left (its marker and the outer wrist marker), the roll kept from the reference frame may be
 # long gone: the member is rolled by the upper arm's markers instead, and of the two rolls one distance leaves
-# (mirror images) the search keeps to the one nearest the member's point in the frame before. Vicon take, right
-# elbow hidden from 1 s, its inner wrist marker lost (a real gap) in a 4-5 m/s swing at 8.5-8.65 s: 13.8 / 138
-# -> 11.7 / 53 mm (the epicondyle 233 mm off at worst before). Its left elbow, whose wrist markers slide,
-# 102 / 205 -> 118 / 196: there the frame before was a fit with a slid marker. Rolled so without the frame
-# before: right 13.8 / 120 (the wrong mirror from 8.55 s). The shank rolled so too: the Vicon legs' knees
-# 22 / 28 -> 28 / 50 mm. A lower price for this roll (0.0001): the right elbow 12.1 / 53, the left's max 258.
+# (mirror images) the search keeps to the one nearest the member's point in the frame before (without it, a fast
+# swing picks the wrong mirror). Rolling the shank so made the knees worse.
 ROLLS_ABOUT_SHAFT = ("forearm",)
 # Where three or more partners are left, the rigid fit carries the forearm's roll from its wrist markers. But skin
-# and a wrist bar turn with pronation, the ulna and the epicondyles do not: on the CMU karate take the lateral
-# epicondyle's marker keeps its distances to the forearm's and the upper arm's markers within 4 mm (SD), to the two
-# wrist markers only within 12-19 mm. So a forearm's member is also rolled about the forearm's line (the styloids'
-# mean to its tracking markers' mean) to keep its distances to the upper arm's markers, as a member with two
-# partners is. That roll is only as firm as those distances change with it: taken in full where they change by
-# ROLL_FIRM_FULL (metres per radian) or more, not where by ROLL_FIRM_FROM or less (with the arm held straight the
-# upper arm's marker lies nearly along the forearm's line as seen from the elbow), blended in between with the fit
-# kept to its distances. Elbow hidden from 1 s (studio options), mean / max: karate left 18.9 / 63.2 -> 18.0 / 59.0
-# mm, right 22.0 / 71.2 -> 19.5 / 60.7, karate on short gaps 8.7 / 79.9 -> 7.1 / 59.2; the Vicon right 11.3 ->
-# 10.5; the Qualisys walk 3.4 / 6.5 -> 4.9 / 10.0. Rolled in full wherever the upper arm is seen: karate 23.3 and
-# 23.0 mm (its arms straight in 1-4 s, 5-12 -> 14-34 mm); rolled, then kept to the distances: 21.7 / 73.9 and
-# 28.0 / 77.7.
+# and a wrist bar turn with pronation, the ulna and the epicondyles do not: the lateral epicondyle's marker keeps
+# its distances to the forearm's and the upper arm's markers within millimetres, to the wrist markers only within
+# centimetres. So a forearm's member is also rolled about the forearm's line (the styloids' mean to its tracking
+# markers' mean) to keep its distances to the upper arm's markers, as a member with two partners is. That roll is
+# only as firm as those distances change with it: taken in full where they change by ROLL_FIRM_FULL (metres per
+# radian) or more, not where by ROLL_FIRM_FROM or less (with the arm held straight the upper arm's marker lies
+# nearly along the forearm's line as seen from the elbow), blended in between with the fit kept to its distances.
 ROLL_FIRM_FROM = 0.02
 ROLL_FIRM_FULL = 0.08
 # Two partners whose spacing bone fixes: the styloids sit on the ends of the radius and the ulna, which the distal
@@ -294,9 +281,8 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                 last[s, k] = lm[seg[k]]  # (NaN when lost; a rebuilt one is written below)
         _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
         # Each seen member's reference: the segment as it is now, unless that has fewer partners than
-        # the one kept, which then stays. (The Vicon take's heel is lost in the frame before its ankle
-        # is: the last frame's reference had only the metatarsals, all on one line, and the ankle was
-        # never rebuilt. Keeping the earlier one took the knee from 100 to 49 mm, knee and ankle hidden.)
+        # the one kept, which then stays (a heel lost a frame before its ankle would leave a reference of the
+        # metatarsals alone, all on one line, from which the ankle cannot be rebuilt).
         if count > MIN_SHAFT_PARTNERS:
             for k in range(rigid):
                 if seen[k] and count - 1 >= _partners(reference[s, k], k, rigid):
