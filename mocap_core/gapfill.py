@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -180,7 +179,7 @@ class LimbFiller:
         if n != self.chain_end or self._chain is None:  # a joint seen for the first time: the limb is whole again
             self.chain_end, self.has_prev[0] = n, False        # only once it is seen
             self._chain = self._chain_up_to(n)
-        _fill_limb(Pose(positions, frames, status), *self._chain, self.solver.kernel_id, self.params, out)
+        _fill_limb(positions, frames, status, *self._chain, self.solver.kernel_id, *self.params, out)
         never = idx[n:]  # joints never located (the carries would hold them from nothing)
         positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
         if self.blend.on:
@@ -188,13 +187,14 @@ class LimbFiller:
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 
-    def _chain_up_to(self, n: int) -> tuple[LimbChain, ChainMemory, ChainLimits]:
-        """What Algorithm 1 takes of the limb's first n joints: views of its state, which the kernel updates."""
+    def _chain_up_to(self, n: int) -> tuple:
+        """What Algorithm 1 takes of the limb's first n joints: the chain, views of its state (which the kernel
+        updates) and its limits. One by one, not as tuples: numba reads a tuple of arrays microseconds slower
+        a call, and this runs for every limb of every frame."""
         lim = self.limits
-        return (LimbChain(self.joints[:n], self.parent_of_root, self.limb.endswith("arm")),
-                ChainMemory(self.prev_pos[:n], self.prev_frames[:n], self.prev_parent_frame, self.has_prev,
-                            self.lengths),
-                ChainLimits(lim.ref0, lim.pp[:n], lim.cones[:n], lim.has_cone[:n], lim.twists[:n], lim.has_twist[:n]))
+        return (self.joints[:n], self.parent_of_root, self.limb.endswith("arm"), self.prev_pos[:n],
+                self.prev_frames[:n], self.prev_parent_frame, self.has_prev, self.lengths, lim.pp[:n], lim.cones[:n],
+                lim.has_cone[:n], lim.twists[:n], lim.has_twist[:n])
 
     def _predict_end(self, positions, frames, status) -> int:
         """The end model's point for a limb lost from its first joint down, within the limb's reach; 1 if put."""
@@ -252,34 +252,12 @@ def _rigid_chain(prev_pos, lengths, root, m):
     return P
 
 
-class Pose(NamedTuple):
-    """One skeleton frame as the kernels fill it in place: positions (J, 3), bone frames (J, 3, 3), status (J,)."""
-    positions: np.ndarray
-    frames: np.ndarray
-    status: np.ndarray
-
-
-class LimbChain(NamedTuple):
-    idx: np.ndarray        # the limb's joints, root first
-    parent: int            # the joint the limb hangs from
-    is_arm: bool
-
-
-class ChainMemory(NamedTuple):
-    """A limb's last whole output, the next frame's starting chain, and its bones' learned lengths."""
-    prev_pos: np.ndarray
-    prev_frames: np.ndarray
-    prev_parent: np.ndarray
-    has_prev: np.ndarray
-    lengths: np.ndarray
-
-
 @njit(cache=True)
-def _fill_limb(pose, chain, memory, limits, solver, params, out):
+def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_frames, prev_parent, has_prev,
+               lengths, pp, cones, has_cone, twists, has_twist, solver, max_iterations, stop_distance_m, constraints,
+               escape_step_deg, escape_max_deg, out):
     """Algorithm 1 for one limb, in place. out = [estimated, held, iterations, max residual m]."""
-    positions, frames, status = pose
-    idx, parent, is_arm = chain
-    prev_pos, prev_frames, prev_parent, has_prev, lengths = memory
+    params = SolverParams(max_iterations, stop_distance_m, constraints, escape_step_deg, escape_max_deg)
     n = idx.shape[0]
     parent_frame = frames[parent].copy()
     if status[idx[0]] == MISSING and is_arm and status[parent] != MISSING:
@@ -311,8 +289,8 @@ def _fill_limb(pose, chain, memory, limits, solver, params, out):
                 ref0 = parent_frame
             if t < n:
                 target = positions[idx[t]].astype(np.float64)
-                run = ChainLimits(ref0, limits.pp[root:last], limits.cones[root:last], limits.has_cone[root:last],
-                                  limits.twists[root:last], limits.has_twist[root:last])
+                run = ChainLimits(ref0, pp[root:last], cones[root:last], has_cone[root:last], twists[root:last],
+                                  has_twist[root:last])
                 it, res = solve(solver, P, R, target, run, params)
                 out[2] += it
                 out[3] = max(out[3], res)
