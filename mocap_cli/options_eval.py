@@ -9,7 +9,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from mocap_cli.rigid_eval import DATA, TAKES
+from mocap_cli.rigid_eval import add_take_args, load_take, take_names
 from mocap_core.leave_one_out import KEEP_MM, LEFT_OUT, STUDIO, score
 
 
@@ -20,31 +20,21 @@ def register(esub) -> None:
                                     "knee and ankle hidden from 1 s; the thesis's worst case; the pelvis lost 1 s in "
                                     "every 2 s. The hidden joints against the localization of the complete take; an "
                                     f"option is kept where leaving it out makes some case worse by over {KEEP_MM:g} mm.")
-    r.add_argument("--takes", default=",".join(TAKES), help=f"comma-separated, of: {', '.join(TAKES)}")
-    r.add_argument("--seconds", type=float, default=20.0, help="at most this much of each take (default 20)")
+    add_take_args(r)
     r.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: one per core)")
     r.add_argument("--report", default="docs/results/options", help="folder for options.md and options.csv")
     r.set_defaults(func=run)
 
 
 def _take(name: str, seconds: float, option: str) -> tuple[str, str, dict[str, float]]:
-    from mocap_core.profiles import load_profile
-    from mocap_core.recordings import read_recording
-
-    file, profile_name = TAKES[name]
-    path, _, take = file.partition(":")
-    rec = read_recording(DATA / path, take or None)
-    rec = rec.slice(0, min(rec.n_frames, int(seconds * rec.rate_hz)))
-    return name, option, score(rec, load_profile(profile_name), [option])[option]
+    rec, profile = load_take(name, seconds)
+    return name, option, score(rec, profile, [option])[option]
 
 
 def run(args) -> int:
     from mocap_core.warmup import ensure_compiled
 
-    names = [t.strip() for t in args.takes.split(",") if t.strip()]
-    unknown = [t for t in names if t not in TAKES]
-    if unknown:
-        raise SystemExit(f"mocap eval options: unknown take {unknown[0]!r} (takes: {', '.join(TAKES)})")
+    names = take_names("options", args.takes)
     ensure_compiled(logging.getLogger("mocap.eval"))
     jobs = [(name, args.seconds, option) for name in names for option in (STUDIO, *LEFT_OUT)]
     rows = []

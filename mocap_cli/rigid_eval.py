@@ -31,24 +31,38 @@ def register(esub) -> None:
                                     "each elbow hidden from 1 s, each knee and ankle hidden from 1 s; the hidden "
                                     "joints measured against each method's solve of the complete take and against "
                                     "the localization's.")
-    r.add_argument("--takes", default=",".join(TAKES), help=f"comma-separated, of: {', '.join(TAKES)}")
-    r.add_argument("--seconds", type=float, default=20.0, help="at most this much of each take (default 20)")
+    add_take_args(r)
     r.add_argument("--report", default="docs/results/rigid", help="folder for rigid.md and rigid.csv")
     r.set_defaults(func=run)
 
 
-def run(args) -> int:
-    names = [t.strip() for t in args.takes.split(",") if t.strip()]
+def add_take_args(parser) -> None:
+    """--takes and --seconds, for the commands that run every shared take."""
+    parser.add_argument("--takes", default=",".join(TAKES), help=f"comma-separated, of: {', '.join(TAKES)}")
+    parser.add_argument("--seconds", type=float, default=20.0, help="at most this much of each take (default 20)")
+
+
+def take_names(command: str, takes: str) -> list[str]:
+    """The --takes list, an unknown name refused with the known ones."""
+    names = [t.strip() for t in takes.split(",") if t.strip()]
     unknown = [t for t in names if t not in TAKES]
     if unknown:
-        raise SystemExit(f"mocap eval rigid: unknown take {unknown[0]!r} (takes: {', '.join(TAKES)})")
+        raise SystemExit(f"mocap eval {command}: unknown take {unknown[0]!r} (takes: {', '.join(TAKES)})")
+    return names
+
+
+def load_take(name: str, seconds: float):
+    """(the recording, at most ``seconds`` of it; its shipped profile) of a shared take by name."""
+    file, profile_name = TAKES[name]
+    path, _, take = file.partition(":")
+    rec = read_recording(DATA / path, take or None)
+    return rec.slice(0, min(rec.n_frames, int(seconds * rec.rate_hz))), load_profile(profile_name)
+
+
+def run(args) -> int:
     rows = []
-    for name in tqdm(names, desc="takes", unit="take"):
-        file, profile_name = TAKES[name]
-        path, _, take = file.partition(":")
-        rec = read_recording(DATA / path, take or None)
-        rec = rec.slice(0, min(rec.n_frames, int(args.seconds * rec.rate_hz)))
-        profile = load_profile(profile_name)
+    for name in tqdm(take_names("rigid", args.takes), desc="takes", unit="take"):
+        rec, profile = load_take(name, args.seconds)
         reference = references(rec, profile)
         for case in cases(profile, rec.labels, int(round(rec.rate_hz))):
             rows += [{"take": name, **row} for row in run_case(case, rec, profile, reference)]

@@ -100,27 +100,9 @@ class Change(NamedTuple):
 @dataclass
 class BlendState:
     """The blend of a limb: its settings (``step``: reacquire_step_m; ``omega``: the spring's, from
-    blend_half_life_s), what blend_transitions keeps per joint between frames, and the frame clock."""
-    last_out: np.ndarray      # (n, 3) the last output
-    out_step: np.ndarray      # (n, 3) and its last step
-    last_raw: np.ndarray      # (n, 3) the source's last position, before the offset
-    raw_vel: np.ndarray       # (n, 3) and its last step
-    seen_raw: np.ndarray      # (n, 2, 3) where each kind of source (0 markers, 1 a fill) was last seen
-    seen_age: np.ndarray      # (n, 2) and how many frames ago
-    last_status: np.ndarray   # (n,)
-    has_last: np.ndarray      # (1,) bool
-    offset: np.ndarray        # (n, 3) the spring's offset
-    offset_vel: np.ndarray    # (n, 3) and its velocity
-    course: np.ndarray        # (n, 3) where the markers' course leads, since they were lost
-    course_step: np.ndarray   # (n, 3) and its step
-    since_loss: np.ndarray    # (n,) seconds since the markers were lost (inf: no loss being eased)
-    eased: np.ndarray         # (n,) and how far it has gone from that course towards the fill (0-1)
-    trust: np.ndarray         # (n, 5) what course_weight learns from (columns ACC_SUM ... LOCATED_RUN)
-    prev_raw: np.ndarray      # (n, 3) the source's position a frame before last_raw
-    prev_vel: np.ndarray      # (n, 3) and its step then
-    course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
-    held_course: np.ndarray   # (n,) bool: that course began where an estimate was given up for a hold
-    course_base: np.ndarray   # (n, 3) the parent's step that course_step moves with (parent alone located)
+    blend_half_life_s), what blend_transitions keeps per joint between frames (``memory``) and blend_frames
+    (the last frames and their turns), and the frame clock."""
+    memory: BlendMemory
     last_frame: np.ndarray    # (n, 3, 3) the last output bone frame (NaN: none)
     turn_axis: np.ndarray     # (n, 3) the frame's offset where its source changed: a turn about this axis
     turn: np.ndarray          # (n, 3) by this angle (radians, column 0) times the spring's share (1), and its
@@ -133,11 +115,12 @@ class BlendState:
 
     @classmethod
     def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0, course: bool = True) -> "BlendState":
-        return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2, 3)),
-                   np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64), np.zeros(1, bool), np.zeros((n, 3)),
-                   np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, np.inf), np.zeros(n),
-                   np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 2), np.nan), np.zeros(n, bool),
-                   np.zeros((n, 3)), np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
+        memory = BlendMemory(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
+                             np.zeros((n, 2, 3)), np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64),
+                             np.zeros(1, bool), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
+                             np.full(n, np.inf), np.zeros(n), np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)),
+                             np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((n, 3)))
+        return cls(memory, np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
                    BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
 
     @property
@@ -152,14 +135,11 @@ class BlendState:
         """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone
         frames, are blended too where given (blend_frames, with the spring's half-life)."""
         # (the kernels take the arrays one by one: numba reads a tuple of twenty arrays ~5 us slower per call)
+        m = self.memory
         if frames is not None and self.omega > 0:  # (before blend_transitions, which moves last_status on)
-            blend_frames(frames, status, idx, self.last_status, self.has_last, self.last_frame, self.turn_axis,
-                         self.turn, self.omega, self.frame_s)
-        blend_transitions(positions, status, idx, self.last_out, self.out_step, self.last_raw, self.raw_vel,
-                          self.seen_raw, self.seen_age, self.last_status, self.has_last, self.offset, self.offset_vel,
-                          self.course, self.course_step, self.since_loss, self.eased, self.trust, self.prev_raw,
-                          self.prev_vel, self.course_len, self.held_course, self.course_base, self.step, self.omega,
-                          self.frame_s, self.course_on)
+            blend_frames(frames, status, idx, m.last_status, m.has_last, self.last_frame, self.turn_axis, self.turn,
+                         self.omega, self.frame_s)
+        blend_transitions(positions, status, idx, *m, self.step, self.omega, self.frame_s, self.course_on)
 
 
 @njit(cache=True)

@@ -406,7 +406,7 @@ def _eased_loss(bias_m: float) -> float:
         status = np.array([ESTIMATED if lost else LOCATED], np.int64)
         positions = (true + (np.array([0.0, 0.0, bias_m]) if lost else 0.0)).reshape(1, 3).copy()
         state.blend(positions, status, np.array([0]))
-    return blend.course_weight(0.05, state.trust[0])
+    return blend.course_weight(0.05, state.memory.trust[0])
 
 
 def test_a_fill_that_missed_where_the_markers_came_back_is_trusted_later_after_a_loss():
@@ -505,8 +505,8 @@ def _swing(rate_hz: float, lost_at: int, other_lost_at: int = 10_000, frames: in
         if other_lost_at <= f < other_back_at:
             status[other] = ESTIMATED
         state.blend(positions, status, np.arange(3 + first))
-        courses.append(state.course[lost].copy())
-        running.append(state.since_loss[lost] < math.inf)
+        courses.append(state.memory.course[lost].copy())
+        running.append(state.memory.since_loss[lost] < math.inf)
         truths.append(truth)
     return np.array(courses), np.array(running), np.array(truths)
 
@@ -581,8 +581,8 @@ def test_an_end_joints_course_moves_with_its_located_parent_known_answer(elbow_l
             status[1] = ESTIMATED  # (its estimate exact: the elbow's output stays on the truth)
         state.blend(positions, status, np.arange(3))
         if f >= lost_at:
-            assert state.since_loss[2] < math.inf  # (the course runs on: the fill is far from trusted yet)
-            np.testing.assert_allclose(state.course[2], truth[2], atol=1e-12)
+            assert state.memory.since_loss[2] < math.inf  # (the course runs on: the fill is far from trusted yet)
+            np.testing.assert_allclose(state.memory.course[2], truth[2], atol=1e-12)
     # the markers' last step, on and on from where the arm stopped, would be 0.28 m off by now (on the sphere, 122 mm)
     straight = truth[2] + along * (f - stop_at)
     assert np.linalg.norm(af.nearest_on_sphere(straight, truth[1], np.linalg.norm(arm[2] - arm[1])) - truth[2]) > 0.1
@@ -661,7 +661,7 @@ def _kick(rate_hz: float, lost_at: int, frames: int = 40):
             positions[1] += BIAS
             status[1] = ESTIMATED
         state.blend(positions, status, np.arange(3))
-        courses.append(state.course[1].copy())
+        courses.append(state.memory.course[1].copy())
         outputs.append(positions[1].copy())
         truths.append(truth)
     return np.array(courses), np.array(outputs), np.array(truths)
@@ -696,8 +696,8 @@ def test_a_missing_frame_leaves_no_stale_step_behind():
         state.blend(positions, status, np.array([0]))
         if not missing:
             np.testing.assert_allclose(positions[0], START + velocity * f / rate_hz, atol=1e-12)
-    acc = state.trust[0, blend.ACC_SUM] / state.trust[0, blend.ACC_N]
-    assert state.trust[0, blend.ACC_N] >= 20
+    acc = state.memory.trust[0, blend.ACC_SUM] / state.memory.trust[0, blend.ACC_N]
+    assert state.memory.trust[0, blend.ACC_N] >= 20
     assert acc < 1e-6, acc
 
 
