@@ -144,7 +144,7 @@ results-beyond: $(STAMP)
 			--no-plots --report docs/results/knee_ankle_memory_$${take}_$$side \
 			|| exit 1; done; done
 
-# Issue 9's targets, met or not, read from the reports that results, results-beyond and results-short write
+# The gap-filling targets, met or not, read from the reports that results, results-beyond and results-short write
 # (runs nothing itself).
 targets: $(STAMP)
 	$(BIN)/mocap eval targets --report docs/results/targets

@@ -146,7 +146,7 @@ def check(results: Path) -> list[Check]:
 
 def render(checks: list[Check]) -> str:
     met = sum(c.met for c in checks)
-    lines = [f"Issue 9's targets against the reports in docs/results (`make targets`): {met} of {len(checks)} "
+    lines = [f"The gap-filling targets against the reports in docs/results (`make targets`): {met} of {len(checks)} "
              "cases met. The studio options, markers removed, CCD, constraints on, unless said. \"Of its limit\": the "
              "figure furthest over its limit, as a share of it (met at 1 or under).", "",
              "![each case's figure as a share of its limit](targets.png)", "",

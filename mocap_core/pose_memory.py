@@ -33,7 +33,7 @@ leg what the other did before); the velocity's search then looks there too. Alwa
 the walks worse (the two legs' markers sit differently); as a fallback, dance1's knee went from 43 to
 33 mm and nothing got worse by more than 4 mm.
 
-Issue 9's "bone lengths learned online from located frames", taken one step further: the whole
+The bone lengths learned online from located frames, taken one step further: the whole
 leg's shape, learned from the same take. It never uses frames it has not seen (a live graph
 learns from the frames before a gap) and never learns from landmarks that were themselves filled.
 """

@@ -568,7 +568,7 @@ def _gap(take, profile, joints, start_s, stop_s=None, part=None, rebuilds=(False
 
 
 def test_sprint_elbow_rebuilt_from_the_olecranon_and_styloids():
-    """Issue 9's elbow target (20 / 60 mm): the elbow's epicondyle markers hidden from 1 s to the end of
+    """The elbow target (20 / 60 mm): the elbow's epicondyle markers hidden from 1 s to the end of
     the sprint. The olecranon and both styloids carry them, the upper arm's two markers keep their
     distances; the swivel alone (the shoulder from the acromion moves a lot) is several times as far."""
     runs = _gap("03_sprint_start_BTK_SprintMotion.trc", "btk_sprint", ["elbow_l"], 1.0)
@@ -589,7 +589,7 @@ def test_walk_heel_rebuilt_from_malleoli_and_toe():
 
 
 def test_walk_knee_and_ankle_rebuilt_from_the_shank_and_foot_tracking_markers():
-    """Issue 9's knee+ankle target (30 mm): the malleoli come back from heel and metatarsals, then the
+    """The knee+ankle target (30 mm): the malleoli come back from heel and metatarsals, then the
     knee's markers from the malleoli, the fibula head and the shank's wand."""
     runs = _gap("02_qualisys_walking_ezc3d_Qualisys.c3d", "qualisys_sports", ["knee_l", "ankle_l"], 0.5, 2.0)
     knee, ankle = runs[True].stats(0), runs[True].stats(1)
@@ -624,7 +624,7 @@ def test_karate_elbow_rebuilt_from_the_forearm_and_upper_arm_markers():
 
 
 def test_karate_elbows_meet_the_elbow_target_with_the_forearm_rolled_by_the_upper_arm():
-    """Issue 9's elbow target (20 / 60 mm), both karate elbows hidden from 1 s to 20 s, the fills as in the studio.
+    """The elbow target (20 / 60 mm), both karate elbows hidden from 1 s to 20 s, the fills as in the studio.
     The wrist bar turns with pronation, the epicondyle does not: the rigid fit's roll, taken from the bar, is
     corrected by the upper arm's marker where that marker's distance fixes it (ROLL_FIRM_FROM). Before: left
     18.9 / 63.2 mm, right 22.0 / 71.2 (the right arm's held poses 24-32 mm off, its strikes over 60)."""
