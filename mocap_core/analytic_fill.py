@@ -223,9 +223,8 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
     if b == k + 1:  # a lone joint: both its bones as learned
         upper, lower = _length(lengths, a, upper), _length(lengths, k, lower)
     # (a longer run keeps its last shape, from the hip to the toe, say, with the knee, ankle and foot
-    # lost: its bones stay as they were, so the toe stays in reach. A learned thigh with the shape's
-    # last knee-toe distance left it out of reach on dance1, the plane of hip, knee and toe undefined,
-    # and the ankle 240 mm off where the last frame's lengths give 77.)
+    # lost: its bones stay as they were, so the toe stays in reach. A learned thigh mixed with the shape's
+    # last knee-toe distance can leave the toe out of reach, and the plane of hip, knee and toe undefined.)
     root, target = positions[idx[a]].copy(), positions[idx[b]].copy()
     if not (vnorm(target - root) > 1e-9 and upper > 0 and lower > 0):
         return 0

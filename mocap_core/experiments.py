@@ -164,7 +164,7 @@ def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, join
     """Hide ``joints`` (and landmarks named in it) in frames [start, stop) and fill them; compare
     with the complete take. ``short_gaps`` (length, every), frames: hide them instead in gaps of
     ``length`` frames, one starting every ``every`` frames from ``start`` on (a studio's occlusions are
-    short: 91 % of the Vicon take's real gaps last 0.1 s or less). ``rate_hz``: the take's rate, which
+    mostly short: a tenth of a second or less). ``rate_hz``: the take's rate, which
     paces the fill's blends. ``rebuild``: lost limb landmarks rebuilt from their segment's others and
     from the profile's tracking markers (``tracking``, frames x markers x 3; ``tracking_of``: the
     segment of each, LandmarkMap.tracking_of), which stay seen. ``pose_memory``: lost knee and ankle

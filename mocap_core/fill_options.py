@@ -26,24 +26,26 @@ BLEND_COURSE_HELP = ("with blend_half_life_s: after a loss, stay on the markers'
                      "joint; false: the spring alone)")
 
 
-class HipOptions(BaseModel):
-    """The hip stage's fills: of the pelvis when every hip marker is lost, and of lost limb landmarks."""
+class _StageOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+    @classmethod
+    def of(cls, params: BaseModel):
+        """The options among a node's params (whose Params derive from this model)."""
+        return cls(**{name: getattr(params, name) for name in cls.model_fields})
+
+
+class HipOptions(_StageOptions):
+    """The hip stage's fills: of the pelvis when every hip marker is lost, and of lost limb landmarks."""
     when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
     rebuild: bool = Field(False, description=REBUILD_HELP)
     pose_memory: bool = Field(False, description=POSE_MEMORY_HELP)
     pair_guard: bool = Field(False, description=PAIR_GUARD_HELP)
 
-    @classmethod
-    def of(cls, params: BaseModel) -> "HipOptions":
-        """The options among a node's params (whose Params derive from this model)."""
-        return cls(**{name: getattr(params, name) for name in cls.model_fields})
 
-
-class FillOptions(BaseModel):
+class FillOptions(_StageOptions):
     """Which fills run beside the thesis's IK. The limb memory and the body model steer the swivel, so they need it;
     the body and end models and the limb memory act on the four limbs (the torso has no mirror to learn from)."""
-    model_config = ConfigDict(extra="forbid", frozen=True)
     swivel: bool = Field(False, description=SWIVEL_HELP)
     segment_carry: bool = Field(False, description=SEGMENT_CARRY_HELP)
     limb_memory: bool = Field(False, description=LIMB_MEMORY_HELP + " (with swivel)")
@@ -60,11 +62,6 @@ class FillOptions(BaseModel):
             raise ValueError(f"{' and '.join(idle)} steer the swivel, which is off: set swivel true, or "
                              f"{' and '.join(idle)} false")
         return self
-
-    @classmethod
-    def of(cls, params: BaseModel) -> "FillOptions":
-        """The options among a node's params (whose Params derive from this model)."""
-        return cls(**{name: getattr(params, name) for name in cls.model_fields})
 
 
 # The studio's choice (the ``studio`` preset, mocap_core.presets): every option on.

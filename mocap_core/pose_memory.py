@@ -21,17 +21,17 @@ come apart from their learned spacing: then a marker is wrong, and the offsets a
 
 Where the frames' times are known, the poses are also looked for by where the toe is going: a walking
 toe passes each place twice a step, in the swing and in the stance, with the knee bent differently
-(VELOCITY_S). walk1's knees 43 / 56 -> 31 / 43 mm. The poses found are fitted, not averaged: the targets'
+(VELOCITY_S). The poses found are fitted, not averaged: the targets'
 offsets as a linear function of the poses' toes, read off at the toe now (LOCAL_FIT_RIDGE).
 
 A recalled ankle is held within the leg's reach: no farther from the hip joint centre than either leg's
-ankle has been seen (after 12.5 s dance1's left leg stretches with the foot pointed, where its poses had it flat).
+ankle has been seen (a leg stretched with the foot pointed, where its poses had it flat, would otherwise
+recall an ankle beyond the leg's reach).
 
 Each leg also keeps the other leg's poses, mirrored across the body, and falls back on them for a
 place of its own toe that none of its own comes within FALLBACK_M of (a dancer often does with one
 leg what the other did before); the velocity's search then looks there too. Always pooled, they made
-the walks worse (the two legs' markers sit differently); as a fallback, dance1's knee went from 43 to
-33 mm and nothing got worse by more than 4 mm.
+walks worse (the two legs' markers sit differently), so they are only a fallback.
 
 The bone lengths learned online from located frames, taken one step further: the whole
 leg's shape, learned from the same take. It never uses frames it has not seen (a live graph
@@ -59,9 +59,8 @@ KEY = "FM2"                             # the toe: every profile has it
 # toes each takes along (0: where the poses had it in the pelvis's frame; 1: as far from the toe as
 # it was there). The thigh keeps the knee near the hip, the foot the ankle near the toe.
 TOE_SHARE = {"FLE": 0.3, "FME": 0.3, "TTC": 0.3, "FAL": 1.0, "TAM": 1.0}
-# With the heel seen, the foot is tracked and the IK stage's segment carry does better (Qualisys walk,
-# knee+ankle hidden from 0.5 s: 33 / 11 mm, where the memory of 0.5 s gives 53 / 46): legs whose heel
-# is seen are left to it.
+# With the heel seen, the foot is tracked and the IK stage's segment carry does better than a memory of
+# a few poses: legs whose heel is seen are left to it.
 HEEL = "FCC"
 # Remembered poses fitted. Over every shared take together (hidden elbows, knees and ankles, the worst case), 10
 # gives a slightly lower mean error than 20 and 40 a higher one, but with 10 a recalled knee jumps where its markers

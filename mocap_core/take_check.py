@@ -7,10 +7,9 @@ not where its label says: the gap fills, which trust what is seen, cannot do bet
 markers share a bone comes from the segment rebuild's table (segment_rebuild.SEGMENTS, the profile's tracking markers
 of that bone) and the pelvis's three landmarks.
 
-Found on the recordings in ../shared/data (`mocap check`; docs/gap_filling.md traces each):
-dance1's left toe markers 5.9-13.3 s, walk1's right toe markers standing still at 2.5-3.2 s, walk2's left wrist
-markers 4.2-4.8 s, the Vicon take's left inner wrist marker 0-1.6 s (elsewhere on the forearm than later); the
-Qualisys walk has none. The thresholds were chosen on every shared recording together.
+On the shared recordings it finds toe markers off their spacing for seconds, a toe marker standing still and a
+wrist marker elsewhere on the forearm than later (`mocap check TAKE` says where). The thresholds were chosen on
+every shared recording together.
 """
 from __future__ import annotations
 
