@@ -32,6 +32,7 @@ import zmq
 
 from mocap_cli.graph_registry import registry_path, write_registry
 from mocap_cli.launch_file import LaunchError, LaunchFile, NodeEntry
+from mocap_core.warmup import PARTS, ensure_compiled
 from nodes.registry import UnknownKind, load_kind
 from nodes.runtime import DIAGNOSTICS, inproc_endpoint
 from nodes.spec import NodeSpec
@@ -54,6 +55,7 @@ class Proc:
     identity: bytes | None = None
     publishes: list[str] = field(default_factory=list)
     subscribes: list[str] = field(default_factory=list)
+    kernels: tuple[str, ...] = ()           # the numba kernels it runs (mocap_core.warmup's parts)
 
 
 @dataclass
@@ -163,7 +165,7 @@ def _node_procs(lf: LaunchFile, entry: NodeEntry, namespace: str, cls, sock_dir:
                         curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
                         else None)
         out.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn, container=entry.container,
-                        host=entry.host,
+                        host=entry.host, kernels=cls.kernels(params),
                         publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
                         subscribes=[spec.wire_topic(t) for t in inputs]))
     return out
@@ -201,6 +203,7 @@ class Launcher:
             where = f"host {host}" if host else "the machine launched without --host"
             raise LaunchError(f"no node of the launch file runs on {where}")
         self.processes = group(self.procs)
+        self.kernels = tuple(k for k in PARTS if any(k in p.kernels for p in self.procs))  # what this machine runs
         self.zctx = zmq.Context()
         self.control = self.zctx.socket(zmq.ROUTER)
         self.control.setsockopt(zmq.LINGER, 0)
@@ -226,8 +229,8 @@ class Launcher:
     def _spawn_standby(self) -> None:
         """Keep one warm spare process: a restart hands it the dead node's spec instead of paying
         for a new python's start-up and kernel loading."""
-        self.standby = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby", self.control_endpoint],
-                                        stdin=subprocess.PIPE)
+        self.standby = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby", self.control_endpoint,
+                                         ",".join(self.kernels)], stdin=subprocess.PIPE)
         self.standby_warm = False
 
     def _respawn(self, p: Process) -> None:
@@ -255,10 +258,8 @@ class Launcher:
         })
 
     def start(self) -> None:
-        from mocap_core.warmup import ensure_compiled
-
         try:  # up front: else every node process would compile the same kernels at once
-            if ensure_compiled(log):
+            if ensure_compiled(log, self.kernels):
                 self.t0 = time.monotonic()  # readiness and --duration count from the graph's start
         except subprocess.CalledProcessError as e:
             if self.stop_requested:  # Ctrl-C during the compile

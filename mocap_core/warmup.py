@@ -1,17 +1,19 @@
 """Load (or compile) the numba kernels before the first real frame, so frame one is not late.
 
-Nodes call this in setup(), before they report ready; offline commands call it once up front.
-Loading from the on-disk cache takes well under a second; the very first compile on a machine
-takes one to two minutes. The launcher compiles once, up front, when the cache is not known to be
-warm (``kernels_cached``): otherwise every node process of a graph would compile the same kernels
-at the same time on the same cores (a first `make demo` took 8.5 minutes that way, not 2).
+The kernels come in parts (PARTS); a node kind says which it runs (``Node.kernels``), and the node
+loop loads those before setup(). Offline commands load what they use once up front. Loading from
+the on-disk cache takes well under a second; the first compile on a machine takes a minute or two.
+The launcher compiles the parts its graph uses once, up front, in parallel, when the cache is not
+known to hold them (``kernels_cached``): otherwise every node process of a graph would compile the
+same kernels at the same time on the same cores (a first `make demo` took 8.5 minutes that way).
 
-    python -m mocap_core.warmup     # compile now (two processes in parallel), then load everything
+    python -m mocap_core.warmup [PART ...]   # compile now (one process per core), then load them
 """
 from __future__ import annotations
 
 import hashlib
 import os
+import selectors
 import subprocess
 import sys
 import time
@@ -21,38 +23,44 @@ from pathlib import Path
 import numpy as np
 
 PACKAGE = Path(__file__).resolve().parent
-# Where "this checkout's kernels are compiled" is remembered (next to numba's own cache files).
+# Which parts of this checkout's kernels are compiled (next to numba's own cache files): the sources'
+# fingerprint on the first line, a part a line after it.
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
-# every solver among them (a test checks)
-PARTS = ("localization", "rebuild", "pose_memory", "pair_guard", "ccd", "fabrik", "jacobian_transpose", "dls", "beyond",
-         "fit")
+# Every solver is a part (a test checks). The longest to compile come first, so that spread over the
+# cores the last one to finish starts early.
+PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "ccd", "fabrik", "jacobian_transpose", "dls",
+         "pair_guard", "rotations")
+# One limb-fill kernel serves every solver and option (the solver and the fills are its arguments): these
+# parts compile it once, in one process, or two processes would compile the same kernel at the same time.
+FILL_PARTS = ("beyond", "ccd", "fabrik", "jacobian_transpose", "dls")
 
 
-def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False) -> None:
+def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = True) -> None:
     for part in parts:
         _warm(part)
         if say:  # progress for whoever waits on a first compile
             print(f"  kernels: {part} ready", file=sys.stderr, flush=True)
-    if tuple(parts) == PARTS:
-        _write_stamp()
+    if stamp:
+        _write_stamp(parts)
 
 
-def ensure_compiled(log) -> bool:
-    """Before a command's first frame: compile the kernels up front, in parallel and saying so, when this
+def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
+    """Before a command's first frame: compile these kernels up front, in parallel and saying so, when this
     checkout has not yet (else the first frames would sit compiling, one process, in silence). True if it did."""
-    if kernels_cached():
+    if kernels_cached(parts):
         return False
-    log.info("compiling the numba kernels for this checkout, once (about 2 minutes on 2 cores)...")
-    log.info("numba kernels compiled and cached in %.0f s", compile_kernels())
+    log.info("compiling the numba kernels for this checkout, once (%s; a minute or two on 2 cores)...",
+             ", ".join(parts))
+    log.info("numba kernels compiled and cached in %.0f s", compile_kernels(parts))
     return True
 
 
 def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
-    pair guard, the fit, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with
+    pair guard, the fit, the rotation conversions of the messages, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with
     the analytic fills of the studio options)."""
     warm = {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
-            "fit": _warm_fit, "localization": _warm_localization}.get(part)
+            "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations}.get(part)
     if warm is not None:
         warm()
     else:
@@ -115,12 +123,16 @@ def _warm_fit() -> None:  # the rigid-skeleton fit: a start, then a frame warm-s
 
 
 def _warm_localization() -> None:
-    from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.localization import Localizer
     from mocap_core.profiles import LANDMARKS
-    from mocap_core.skeleton import N_JOINTS
 
     Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
+
+
+def _warm_rotations() -> None:  # frames <-> quaternions, as the skeleton messages carry them
+    from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
+    from mocap_core.skeleton import N_JOINTS
+
     quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
 
 
@@ -156,38 +168,82 @@ def fingerprint() -> str:
     return h.hexdigest()
 
 
-def kernels_cached() -> bool:
+def kernels_cached(parts: tuple[str, ...] = PARTS) -> bool:
+    return set(parts) <= _stamped()
+
+
+def _stamped() -> set[str]:
+    """The parts the stamp says are compiled for these very sources."""
     try:
-        return STAMP.read_text() == fingerprint()
+        lines = STAMP.read_text().splitlines()
     except OSError:
-        return False
+        return set()
+    return set(lines[1:]) if lines and lines[0] == fingerprint() else set()
 
 
-def _write_stamp() -> None:
+def _write_stamp(parts: tuple[str, ...]) -> None:
     try:
         STAMP.parent.mkdir(parents=True, exist_ok=True)
-        STAMP.write_text(fingerprint())
+        STAMP.write_text("\n".join([fingerprint(), *sorted(_stamped() | set(parts))]) + "\n")
     except OSError:
         pass  # a read-only checkout: the launcher will just compile (or load) up front each time
 
 
-def compile_kernels(workers: int | None = None) -> float:
-    """Compile every kernel into the on-disk cache, the parts spread over the cores; returns seconds.
+def compile_kernels(parts: tuple[str, ...] = PARTS, workers: int | None = None) -> float:
+    """Compile these kernels into the on-disk cache, spread over the cores; returns seconds.
 
-    The parts share helper kernels, so some are compiled twice; two processes saving the same
-    cache index at once may lose an entry, which the final pass (one process) puts back.
+    A process per core takes the next part (the longest first) whenever it is free. The parts share helper
+    kernels, so some are compiled twice; two processes saving the same cache index at once may lose an entry,
+    which the final pass (one process, loading) puts back.
     """
     started = time.monotonic()
-    workers = max(1, min(workers or os.cpu_count() or 1, len(PARTS)))
-    groups = [PARTS[i::workers] for i in range(workers)]
-    procs = [subprocess.Popen([sys.executable, "-c",
-                               f"from mocap_core.warmup import warm_up; warm_up({g!r}, say=True)"]) for g in groups]
-    for p in procs:
-        if p.wait():
-            raise subprocess.CalledProcessError(p.returncode, p.args)
-    subprocess.run([sys.executable, "-c", "from mocap_core.warmup import warm_up; warm_up()"], check=True)
+    fill = tuple(p for p in PARTS if p in parts and p in FILL_PARTS)
+    tasks = [fill] if fill else []
+    tasks += [(p,) for p in PARTS if p in parts and p not in FILL_PARTS]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(tasks)))
+    procs = [subprocess.Popen([sys.executable, "-m", "mocap_core.warmup", "--worker"], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True) for _ in range(workers)]
+    with selectors.DefaultSelector() as sel:
+        for p in procs:
+            sel.register(p.stdout, selectors.EVENT_READ, p)
+            _hand_out(p, tasks)
+        while sel.get_map():
+            for key, _ in sel.select():
+                p = key.data
+                if p.stdout.readline():  # a part done
+                    _hand_out(p, tasks)
+                else:  # no more work, or it died
+                    sel.unregister(p.stdout)
+                    if p.wait():
+                        for q in procs:
+                            q.kill()
+                        raise subprocess.CalledProcessError(p.returncode, p.args)
+    subprocess.run([sys.executable, "-c", f"from mocap_core.warmup import warm_up; warm_up({tuple(parts)!r})"],
+                   check=True)
     return time.monotonic() - started
 
 
+def _hand_out(worker: subprocess.Popen, tasks: list[tuple[str, ...]]) -> None:
+    if tasks:
+        worker.stdin.write(" ".join(tasks.pop(0)) + "\n")
+        worker.stdin.flush()
+    else:
+        worker.stdin.close()
+
+
+def _compile_worker() -> None:
+    """One compiling process: the parts of each line on stdin, then "done" on stdout."""
+    for line in sys.stdin:
+        warm_up(tuple(line.split()), say=True, stamp=False)
+        print("done", flush=True)
+
+
 if __name__ == "__main__":
-    print(f"numba kernels compiled and cached in {compile_kernels():.0f} s")
+    if sys.argv[1:] == ["--worker"]:
+        _compile_worker()
+    else:
+        unknown = set(sys.argv[1:]) - set(PARTS)
+        if unknown:
+            sys.exit(f"unknown part(s) {', '.join(sorted(unknown))}; the parts: {', '.join(PARTS)}")
+        chosen = tuple(sys.argv[1:]) or PARTS
+        print(f"numba kernels compiled and cached in {compile_kernels(chosen):.0f} s")

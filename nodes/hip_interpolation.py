@@ -23,7 +23,6 @@ from mocap_core.marker_gate import MarkerGate
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
 from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
-from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 
 
@@ -47,17 +46,15 @@ class HipInterpolation(Node):
     subscribes = {"markers/raw": MarkerFrame}
     publishes = {"markers/filled": MarkerFrame}
 
+    @classmethod
+    def kernels(cls, params):
+        return tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(params, part))
+
     def setup(self) -> None:
         if self.params.profile != AUTO:
             self._use(load_profile(self.params.profile))  # a bad name fails here, before the graph is ready
         self.hips = HipInterpolator(max_step_m=self.params.max_step_m, when_lost=self.params.when_lost)
         self.fills = None  # made when the profile is resolved: they need its tracking markers and landmarks
-        if self.params.rebuild:
-            warm_up(("rebuild",))  # its kernel loaded before ready, not on the first frame (0.65 s)
-        if self.params.pose_memory:
-            warm_up(("pose_memory",))
-        if self.params.pair_guard:
-            warm_up(("pair_guard",))
         self.labels: list[str] | None = None
         self.map = None
         self.gate = MarkerGate()  # markers no body could have put there never reach what the stages learn

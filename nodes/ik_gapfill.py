@@ -18,7 +18,6 @@ from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
-from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
 
@@ -56,8 +55,13 @@ class IkGapfill(Node):
             return {"skeleton/torso": SkeletonFrame}
         return {f"skeleton/limb/{params.limb}": LimbSolution}
 
+    @classmethod
+    def kernels(cls, params):
+        # the fill kernel with the thesis's options runs less of itself than with any other
+        thesis = FillOptions.of(params) == FillOptions()
+        return (params.solver if thesis else "beyond", "rotations")
+
     def setup(self) -> None:
-        warm_up()
         p = self.params
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
                                  load_constraints(p.constraints_file), FillOptions.of(p))

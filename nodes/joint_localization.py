@@ -9,7 +9,6 @@ from pydantic import BaseModel, ConfigDict, Field
 from messages import FLAG_INTERPOLATED, MarkerFrame, SkeletonFrame
 from mocap_core.localization import Localizer
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile
-from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import to_message
 
@@ -26,8 +25,11 @@ class JointLocalization(Node):
     subscribes = {"markers/filled": MarkerFrame}
     publishes = {"skeleton/localized": SkeletonFrame}
 
+    @classmethod
+    def kernels(cls, params):
+        return ("localization", "rotations")
+
     def setup(self) -> None:
-        warm_up()
         if self.params.profile == AUTO:  # hip_interpolation chose it and stamped its up axis
             self.localizer = Localizer()
         else:

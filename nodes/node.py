@@ -42,6 +42,12 @@ class Node:
         """Topics this node writes with these params (default: the class's ``publishes``)."""
         return cls.publishes
 
+    @classmethod
+    def kernels(cls, params: BaseModel) -> tuple[str, ...]:
+        """The numba kernels (parts of mocap_core.warmup) this node runs with these params: the launcher
+        compiles them up front and the node loads them before setup(), so its first frame is not late."""
+        return ()
+
     def __init__(self, params: BaseModel, ctx: "NodeContext"):
         self.params = params
         self.ctx = ctx

@@ -11,6 +11,7 @@ import time
 import zmq
 
 from messages import Heartbeat, Message, encode
+from mocap_core.warmup import warm_up
 from nodes.node import Node
 from nodes.node_stats import DIAGNOSTICS
 from nodes.spec import NodeSpec
@@ -256,6 +257,7 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
     try:
         for current in loops:
             try:
+                warm_up(type(current.node).kernels(current.node.params))
                 current.node.setup()
             except KeyboardInterrupt:  # Ctrl-C while starting: the whole process group was asked to stop
                 return 0

@@ -16,7 +16,6 @@ from mocap_core.limb_join import LIMBS, FrameJoiner, Joined
 from mocap_core.rig import BONE_JOINT, BONES, default_rig_offsets, local_positions, rig_local_rotations, \
     rig_world_rotations, to_unity_position
 from mocap_core.skeleton import Status
-from mocap_core.warmup import warm_up
 from mocap_core.world import DEFAULT_UP
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
@@ -46,8 +45,11 @@ class Retarget(Node):
     def inputs(cls, params):
         return {"skeleton/fitted": SkeletonFrame} if params.input == "whole" else cls.subscribes
 
+    @classmethod
+    def kernels(cls, params):
+        return ("rotations",)
+
     def setup(self) -> None:
-        warm_up()
         self.joiner = FrameJoiner(self.params.max_wait_ms / 1000)
         self.last_world = np.tile(np.eye(3), (len(BONES), 1, 1))
 

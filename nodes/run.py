@@ -40,18 +40,18 @@ def _tell_launcher_warm(control_endpoint: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     standby = bool(argv) and argv[0] == "--standby"
-    if not (len(argv) == 1 or (standby and len(argv) == 2)):
-        print("usage: python -m nodes.run '<NodeSpec JSON>' | '[<NodeSpec JSON>, ...]' | --standby [CONTROL_ENDPOINT]"
-              "  (normally started by `mocap launch`)", file=sys.stderr)
+    if not (len(argv) == 1 or (standby and len(argv) <= 3)):
+        print("usage: python -m nodes.run '<NodeSpec JSON>' | '[<NodeSpec JSON>, ...]' | --standby [CONTROL_ENDPOINT "
+              "[KERNEL,...]]  (normally started by `mocap launch`)", file=sys.stderr)
         return 2
     _die_with_parent()
     if standby:
-        # A spare process for fast restarts: imports and loads the kernels now, then waits for the spec
+        # A spare process for fast restarts: imports and loads the graph's kernels now, then waits for the spec
         # of the node it has to replace on stdin (the launcher's; python start-up alone takes ~1.5 s).
-        from mocap_core.warmup import warm_up
+        from mocap_core.warmup import PARTS, warm_up
 
-        warm_up()
-        if len(argv) == 2:
+        warm_up(PARTS if len(argv) < 3 else tuple(k for k in argv[2].split(",") if k))
+        if len(argv) >= 2:
             _tell_launcher_warm(argv[1])
         try:
             line = sys.stdin.readline()

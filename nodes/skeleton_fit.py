@@ -16,7 +16,6 @@ from mocap_core.fit.fitter import FitSettings
 from mocap_core.fit.live import LiveFit, LiveSettings
 from mocap_core.fit.subject import load_subject
 from mocap_core.profiles import AUTO, load_profile, profile_for
-from mocap_core.warmup import warm_up
 from nodes.runtime import Node
 from nodes.skeleton_codec import to_message
 
@@ -37,8 +36,11 @@ class SkeletonFit(Node):
     subscribes = {"markers/raw": MarkerFrame}
     publishes = {"skeleton/fitted": SkeletonFrame}
 
+    @classmethod
+    def kernels(cls, params):
+        return ("fit", "localization", "rotations")  # it localizes the frames that calibrate it
+
     def setup(self) -> None:
-        warm_up()
         if self.params.profile != AUTO:
             self.profile = load_profile(self.params.profile)  # a bad name fails here, before the graph is ready
             self.ctx.default_up_axis = self.profile.up_axis  # for sources that do not say it

@@ -15,25 +15,42 @@ def test_the_warm_up_parts_cover_every_solver():
 
 def test_the_stamp_follows_the_kernel_sources(tmp_path, monkeypatch):
     monkeypatch.setattr(warmup, "STAMP", tmp_path / "stamp")
-    assert not warmup.kernels_cached()  # no stamp yet
+    assert not warmup.kernels_cached(("localization",))  # no stamp yet
     warmup.warm_up(("localization",))
+    assert warmup.kernels_cached(("localization",))
     assert not warmup.kernels_cached()  # a part is not the whole
     warmup.warm_up()
     assert warmup.kernels_cached()
-    (tmp_path / "stamp").write_text("a fingerprint of other sources")
-    assert not warmup.kernels_cached()
+    (tmp_path / "stamp").write_text("a fingerprint of other sources\nlocalization\n")
+    assert not warmup.kernels_cached(("localization",))
 
 
-def test_the_launcher_compiles_up_front_when_the_cache_is_not_known_warm(tmp_path):
+def test_the_launcher_compiles_the_kernels_its_graph_runs_up_front(tmp_path):
     stamp = tmp_path / "stamp"
     launch = tmp_path / "g.yaml"
-    launch.write_text("nodes:\n  - {id: src, kind: synthetic_source, params: {rate_hz: 200, frames: 20}}\n")
+    launch.write_text("nodes:\n  - {id: src, kind: synthetic_source, params: {rate_hz: 200, frames: 20}}\n"
+                      "  - {id: localize, kind: joint_localization}\n")
     env = {**os.environ, "MOCAP_KERNEL_STAMP": str(stamp), "MOCAP_RUN_DIR": str(tmp_path)}
     run = lambda: subprocess.run([sys.executable, "-m", "mocap_cli.main", "launch", str(launch), "--until-done"],  # noqa: E731
                                  cwd=REPO, env=env, capture_output=True, text=True, timeout=240)
     first = run()
     assert first.returncode == 0, first.stderr
     assert "compiling the numba kernels" in first.stderr and "compiled and cached in" in first.stderr
-    assert stamp.read_text() == warmup.fingerprint()
+    assert stamp.read_text().splitlines() == [warmup.fingerprint(), "localization", "rotations"]
     second = run()
     assert second.returncode == 0 and "compiling the numba kernels" not in second.stderr
+
+
+def test_a_node_kind_names_the_kernels_it_runs():
+    from nodes.registry import load_kind
+
+    gapfill = load_kind("ik_gapfill")
+    assert gapfill.kernels(gapfill.Params(limb="left_arm", solver="fabrik")) == ("fabrik", "rotations")
+    assert gapfill.kernels(gapfill.Params(limb="left_arm", preset="studio"))[0] == "beyond"
+    hips = load_kind("hip_interpolation")
+    assert hips.kernels(hips.Params()) == ()
+    assert set(hips.kernels(hips.Params(preset="studio"))) == {"rebuild", "pose_memory", "pair_guard"}
+    for kind in ("ik_gapfill", "hip_interpolation", "joint_localization", "skeleton_fit", "retarget"):
+        cls = load_kind(kind)
+        params = cls.Params(limb="torso") if kind == "ik_gapfill" else cls.Params()
+        assert set(cls.kernels(params)) <= set(warmup.PARTS), kind
