@@ -198,7 +198,7 @@ def take_shape(now, shape, turn, pelvis):
         before, after = np.empty((3, 3)), np.empty((3, 3))
         for r, m in enumerate((FLE, FME, MARKER)):
             before[r], after[r] = shape[m], now[m]
-        rot, t = rigid_fit_first(before, after, 3)
+        rot, t = rigid_fit_first(before, after, before.shape[0])  # (a literal 3 would compile the fit again)
         for k in range(FAL, TAM + 1):
             if not vfinite(now[k]) and vfinite(shape[k]):
                 now[k] = mv(rot, shape[k]) + t

@@ -140,7 +140,8 @@ def _reject(v, unit_axis):
 @njit(cache=True)
 def _frame(x, y, z):
     f = np.empty((3, 3))
-    f[:, 0], f[:, 1], f[:, 2] = x, y, z
+    for i in range(3):  # element by element: a slice assignment compiles numba's shape-mismatch error too
+        f[i, 0], f[i, 1], f[i, 2] = x[i], y[i], z[i]
     return f
 
 
@@ -206,7 +207,7 @@ def _hinge_from_lateral(parent, lateral, distal, sign, medial_hint, offset):
     return centre, medial
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # called with constants: inlined, not compiled once per constant
 def _regression(fle, fal, ttc, up_shank, c1, c2, c3):
     """The thesis's knee/ankle regressions (facts 7.4): origin FLE (knee) or FAL (ankle)."""
     x = _unit(0.5 * (fle + fal) - ttc)
@@ -219,7 +220,7 @@ def _regression(fle, fal, ttc, up_shank, c1, c2, c3):
     return origin + (c1 * s) * e1 + (c2 * s) * e2 + (c3 * s) * z
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # called with constants: inlined, not compiled once per constant
 def _running(sums, counts, k0, k1, ci, sample):
     """Add a sample (NaN = none) to a running mean; return the mean (NaN before any sample)."""
     if np.isfinite(sample).all():
@@ -255,7 +256,7 @@ def hip_centres(lm):
     return r_hip, mid_asis + left * lateral + down_back, mid_asis - left * lateral + down_back
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # its one caller is the batch: compiled once, there
 def _localize_frame(lm, pos, frames, used, body, sums, counts):
     height_given, mass_given, marker_r = body[0], body[1], body[2]
     elbow_off, knee_off, ankle_off = body[3] + marker_r, body[4] + marker_r, body[5] + marker_r

@@ -24,7 +24,7 @@ def keep(keys, values, state, last_key, key, value):
     state[1], state[0] = (i + 1) % CAPACITY, min(state[0] + 1, CAPACITY)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # called with constants: inlined, not compiled once per constant
 def nearest(keys, count, point, best_d, best_i, offset=0):
     """Merge the first ``count`` keys of one ring into the nearest found so far (``best_d``, ``best_i``,
     nearest first, len = how many are wanted; start them at inf), by insertion. A key's index is

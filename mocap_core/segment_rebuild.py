@@ -109,6 +109,7 @@ DISTANCE_PRIOR = 0.1     # weight of the rigid estimate against the distances (p
 # few millimetres, where the styloids, on a turning radius under sliding skin, do not. The first pass leaves the
 # point where all of them agree best; the second moves it towards the distances that hold.
 TRACKING_PRIOR = 0.3
+EVERY_POINT = np.int64(-1)  # _keep_distances' held_from for the first pass (a numpy int: see n in rebuild_frame)
 # Partners on one line, or two across the bone, leave the rotation about their line free: the roll. Where the bone
 # above is seen, a refined member is carried by the least turn of that line and then rolled about it to the angle
 # that keeps its learned distances to the bone above's tracking markers best (searched within MAX_ROLL either
@@ -268,7 +269,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
     previous = np.empty((segments.shape[1], 3))  # each member in the frame before
     for s in range(segments.shape[0]):
         seg, rigid = segments[s], rigid_count[s]
-        width, count = 0, 0
+        width, count = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
         for k in range(seg.shape[0]):
             if seg[k] < 0:
                 break
@@ -301,7 +302,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                 continue
             slid[s, k] = _slid(lm, seg, rigid, seen, reference[s, k], pairs[s, 0], pairs[s, 1], slid[s, k], along[s],
                                along_since[s], k, time_s)
-            n, shaft = 0, 0
+            n, shaft = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
             for m in range(rigid):
                 if m != slid[s, k] and seen[m] and vfinite(reference[s, k, m]):
                     before[n], after[n] = reference[s, k, m], lm[seg[m]]
@@ -345,7 +346,7 @@ def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_
                                                   point, above)
                 kept = rolled_p
                 if firm < 1.0:
-                    kept = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, -1)
+                    kept = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, EVERY_POINT)
                     kept = _keep_distances(kept, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR,
                                            held_from[s])
                 p = firm * rolled_p + (1.0 - firm) * kept
