@@ -44,6 +44,28 @@ def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = Tru
         _write_stamp(parts)
 
 
+def hip_parts(options) -> tuple[str, ...]:
+    """The kernels the hip stage runs with these options (mocap_core.fill_options.HipOptions, or params that
+    derive from it)."""
+    return tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(options, part))
+
+
+def fill_parts(options, solver: str) -> tuple[str, ...]:
+    """The IK stage's, with these options (FillOptions, or params that derive from it) and solver: the fill kernel
+    runs less of itself with the thesis's options than with any other."""
+    from mocap_core.fill_options import FillOptions
+
+    return (solver,) if FillOptions.of(options) == FillOptions() else ("beyond",)
+
+
+def pipeline_parts(preset: str, solver: str, fill_gaps: bool = True) -> tuple[str, ...]:
+    """What mocap_core.pipeline.SkeletonPipeline runs with these arguments."""
+    from mocap_core.presets import PRESETS
+
+    fills = hip_parts(PRESETS[preset].hips) + fill_parts(PRESETS[preset].ik, solver) if fill_gaps else ()
+    return ("localization", "rotations") + fills
+
+
 def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
     """Before a command's first frame: compile these kernels up front, in parallel and saying so, when this
     checkout has not yet (else the first frames would sit compiling, one process, in silence). True if it did."""

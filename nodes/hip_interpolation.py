@@ -23,6 +23,7 @@ from mocap_core.marker_gate import MarkerGate
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
 from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
+from mocap_core.warmup import hip_parts
 from nodes.runtime import Node
 
 
@@ -48,7 +49,7 @@ class HipInterpolation(Node):
 
     @classmethod
     def kernels(cls, params):
-        return tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(params, part))
+        return hip_parts(params)
 
     def setup(self) -> None:
         if self.params.profile != AUTO:

@@ -18,6 +18,7 @@ from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
+from mocap_core.warmup import fill_parts
 from nodes.runtime import Node
 from nodes.skeleton_codec import from_message, to_message
 
@@ -57,9 +58,7 @@ class IkGapfill(Node):
 
     @classmethod
     def kernels(cls, params):
-        # the fill kernel with the thesis's options runs less of itself than with any other
-        thesis = FillOptions.of(params) == FillOptions()
-        return (params.solver if thesis else "beyond", "rotations")
+        return fill_parts(params, params.solver) + ("rotations",)
 
     def setup(self) -> None:
         p = self.params

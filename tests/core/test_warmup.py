@@ -41,7 +41,7 @@ def test_the_launcher_compiles_the_kernels_its_graph_runs_up_front(tmp_path):
     assert second.returncode == 0 and "compiling the numba kernels" not in second.stderr
 
 
-def test_a_node_kind_names_the_kernels_it_runs():
+def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
     from nodes.registry import load_kind
 
     gapfill = load_kind("ik_gapfill")
@@ -54,3 +54,7 @@ def test_a_node_kind_names_the_kernels_it_runs():
         cls = load_kind(kind)
         params = cls.Params(limb="torso") if kind == "ik_gapfill" else cls.Params()
         assert set(cls.kernels(params)) <= set(warmup.PARTS), kind
+    assert warmup.pipeline_parts("thesis", "dls") == ("localization", "rotations", "dls")
+    assert set(warmup.pipeline_parts("studio", "ccd")) == {"localization", "rotations", "rebuild", "pose_memory",
+                                                          "pair_guard", "beyond"}
+    assert warmup.pipeline_parts("studio", "ccd", fill_gaps=False) == ("localization", "rotations")
