@@ -197,6 +197,17 @@ def _expanded_size(node, budget: int) -> int:
     return count
 
 
+def _is_param(node: dict, name: str) -> bool:
+    """Whether the node's kind has a param of this name: it wins over the launch-file key of the same name
+    (``--set qtm.host=...`` is QTM's address, not the machine that runs the node)."""
+    from nodes.registry import UnknownKind, load_kind
+
+    try:
+        return name in load_kind(str(node.get("kind"))).Params.model_fields
+    except UnknownKind:
+        return False
+
+
 def load_launch_file(path: str | Path, overrides: list[str] = ()) -> LaunchFile:
     """The launch file with the ``--set`` overrides applied, all of it validated together (an override gets the
     same checks as the file: a kind of null, 0 or 1000 replicas are refused with the node and the field named)."""
@@ -222,7 +233,7 @@ def load_launch_file(path: str | Path, overrides: list[str] = ()) -> LaunchFile:
         node, param, value = parse_override(text)
         if node not in by_id:
             raise LaunchError(f"--set {text!r}: no node {node!r} in {path} (nodes: {', '.join(map(str, by_id))})")
-        if param in NodeEntry.model_fields and param not in ("id", "params"):
+        if param in NodeEntry.model_fields and param not in ("id", "params") and not _is_param(by_id[node], param):
             by_id[node][param] = value
         else:
             by_id[node].setdefault("params", {})

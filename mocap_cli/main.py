@@ -88,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Start every node of a launch file as its own process; Ctrl-C stops them all.")
     s.add_argument("file", help="launch file (YAML), e.g. launch/studio.yaml")
     s.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE",
-                   help="override a node param (repeatable), e.g. --set solver.solver=fabrik")
+                   help="override a node param (repeatable), e.g. --set left_arm.solver=fabrik; a launch-file key of "
+                        "the node (container, replicas, host, ...) where its kind has no param of that name")
     s.add_argument("--name", help="graph name (default: the launch file's name)")
     s.add_argument("--duration", type=float, help="stop after this many seconds")
     s.add_argument("--until-done", action="store_true", help="stop when every source has finished")

@@ -206,7 +206,9 @@ def _stamped() -> set[str]:
 def _write_stamp(parts: tuple[str, ...]) -> None:
     try:
         STAMP.parent.mkdir(parents=True, exist_ok=True)
-        STAMP.write_text("\n".join([fingerprint(), *sorted(_stamped() | set(parts))]) + "\n")
+        part = STAMP.with_name(f"{STAMP.name}.{os.getpid()}")  # then renamed: node processes read it meanwhile
+        part.write_text("\n".join([fingerprint(), *sorted(_stamped() | set(parts))]) + "\n")
+        os.replace(part, STAMP)
     except OSError:
         pass  # a read-only checkout: the launcher will just compile (or load) up front each time
 

@@ -93,6 +93,15 @@ def test_a_node_that_cannot_start_stops_the_launch_with_one_line(tmp_path, overr
     assert time.monotonic() - t < 60
 
 
+def test_a_set_names_the_node_kinds_param_before_the_launch_file_key_of_that_name():
+    # host: is also the machine a node runs on (hosts:); --set qtm.host is where QTM is, as the README says
+    lf = load_launch_file(REPO / "launch/qtm_unity.yaml", ["qtm.host=192.168.0.10", "vmc.host=192.168.0.20"])
+    nodes = {n.id: n for n in lf.nodes}
+    assert nodes["qtm"].params["host"] == "192.168.0.10" and nodes["vmc"].params["host"] == "192.168.0.20"
+    assert nodes["qtm"].host is None and nodes["vmc"].host is None
+    assert load_launch_file(REPO / "launch/studio.yaml", ["hips.keep_last=true"]).nodes[1].keep_last
+
+
 def test_preset_studio_is_the_gap_filling_beyond_the_thesis_and_a_param_beside_it_wins():
     from mocap_core.fill_options import STUDIO, FillOptions
     from nodes.hip_interpolation import Params as HipParams
