@@ -52,7 +52,6 @@ LIMB_CHAINS: dict[str, tuple[str, ...]] = {
     "left_leg": LIMBS["left_leg"],
     "right_leg": LIMBS["right_leg"],
 }
-LIMB_ORDER = ("torso", "left_arm", "right_arm", "left_leg", "right_leg")
 # The limb whose poses, mirrored, each limb also remembers (limb memory).
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
 # A predicted end is put at most this share of the limb's reach from its root: the joints between stay bent.
@@ -337,7 +336,7 @@ class GapFiller:
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, options: FillOptions = FillOptions()):
         constraints = constraints if constraints is not None else load_constraints()
-        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, options) for limb in LIMB_ORDER}
+        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, options) for limb in LIMBS}  # the torso first
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:
         return {limb: f.fill(positions, frames, status, time_s) for limb, f in self.limbs.items()}

@@ -14,8 +14,9 @@ import numpy as np
 
 from mocap_core.gapfill import LIMB_CHAINS
 from mocap_core.skeleton import INDEX, Status
+from mocap_core.skeleton import LIMBS as STAGES
 
-LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
+LIMBS = tuple(limb for limb in STAGES if limb != "torso")  # what joins the torso
 RESTART_JUMP = 10  # frames
 # Limbs are solved from their frame's torso, so limbs here without it mean the torso is still queued (a stage reads
 # its inputs in turn, and after a stall a backlog of limbs can come first), not lost: they wait for it until a later

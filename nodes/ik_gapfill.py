@@ -17,6 +17,7 @@ from mocap_core.gapfill import LIMB_CHAINS, LimbFiller
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
+from mocap_core.skeleton import LIMBS
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
 from mocap_core.warmup import fill_parts
 from nodes.runtime import Node
@@ -26,7 +27,7 @@ from nodes.skeleton_codec import from_message, to_message
 class Params(FillOptions):
     """The limb, the solver and its limits, and the fills beyond the thesis (FillOptions)."""
     model_config = ConfigDict(extra="forbid")
-    limb: Literal["torso", "left_arm", "right_arm", "left_leg", "right_leg"]
+    limb: Literal[tuple(LIMBS)]  # type: ignore[valid-type]  (the stages of mocap_core.skeleton)
     preset: Preset = Field("thesis", description=PRESET_HELP)
     solver: str = Field("ccd", description=f"one of {', '.join(SOLVERS)}")
     constraints: bool = True
