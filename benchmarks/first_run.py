@@ -88,7 +88,9 @@ def main() -> None:
         python, install_s = sys.executable, None
         if args.install:
             t = time.monotonic()
-            subprocess.run(["make", "-s", "setup"], cwd=clone, check=True)
+            setup = subprocess.run(["make", "-s", "setup"], cwd=clone, capture_output=True, text=True)
+            if setup.returncode:
+                sys.exit(f"make setup failed in {clone}:\n{setup.stderr[-3000:]}")
             install_s, python = time.monotonic() - t, str(clone / ".venv" / "bin" / "python")
         t = first_demo(clone, python)
         print(f"run {run + 1}: " + (f"install {install_s:.0f} s, then " if install_s is not None else "")

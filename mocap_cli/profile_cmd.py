@@ -6,7 +6,7 @@ from pathlib import Path
 
 from mocap_core.landmark_needs import describe_missing, needed_by, site, unlocatable
 from mocap_core.profile_draft import draft_yaml
-from mocap_core.profiles import DEFAULT_UP, LANDMARKS, load_profile
+from mocap_core.profiles import DEFAULT_UP, LANDMARKS, load_profile, shipped
 from mocap_core.recordings import read_recording
 
 
@@ -16,6 +16,8 @@ def add_parser(sub) -> None:
     e = psub.add_parser("explain", help="each landmark: where it is on the body, the joints that need it, and "
                                         "(with --profile) the labels a profile gives it")
     e.add_argument("--profile", help="a profile to show against the landmarks (a name from profiles/ or a path)")
+    e.add_argument("--markdown", action="store_true", help="the page docs/landmarks.md is: a table, with the labels "
+                                                           "of every shipped profile")
     e.set_defaults(func=cmd_explain)
     i = psub.add_parser("init", help="draft a profile for a recording's marker set from the common naming "
                                      "conventions, every guess commented for you to check")
@@ -26,6 +28,9 @@ def add_parser(sub) -> None:
 
 
 def cmd_explain(args) -> int:
+    if args.markdown:
+        print(landmarks_page(), end="")
+        return 0
     profile = load_profile(args.profile) if args.profile else None
     needs = needed_by()
     print("Landmarks (the PAF running set's names; a profile maps each onto your labels):\n")
@@ -36,6 +41,24 @@ def cmd_explain(args) -> int:
             line += f"\n        {profile.name}: {profile.landmarks.get(name, '(not in the profile)')}"
         print(line)
     return 0
+
+
+def landmarks_page() -> str:
+    """docs/landmarks.md: every landmark, where it is, what is lost without it, and its labels in the shipped
+    profiles (made by this function: `mocap profile explain --markdown > docs/landmarks.md`)."""
+    profiles = [load_profile(name) for name in shipped()]
+    needs = needed_by()
+    lines = ["# Landmarks", "",
+             "Localization works on these landmarks (the PAF running set's names); a profile maps each onto a "
+             "recording's labels (README, \"Your own marker set\"). \"Without it\": the joints that a profile "
+             "lacking only this landmark cannot locate (other landmarks stand in for the rest). The shipped profiles' "
+             "labels show how other marker sets name the same places. Made by `mocap profile explain --markdown`.", "",
+             "| landmark | where on the body | without it | " + " | ".join(f"`{p.name}`" for p in profiles) + " |",
+             "|---|---|---|" + "---|" * len(profiles)]
+    for name in LANDMARKS:
+        labels = [f"`{p.landmarks[name]}`" if name in p.landmarks else "" for p in profiles]
+        lines.append(f"| `{name}` | {site(name)} | {', '.join(needs[name]) or '-'} | " + " | ".join(labels) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def cmd_init(args) -> int:

@@ -200,7 +200,7 @@ def load_profile(name_or_path: str | Path) -> Profile:
     if not path.exists() and not path.suffix:
         path = PROFILE_DIR / f"{name_or_path}.yaml"
     if not path.exists():
-        known = ", ".join(sorted(p.stem for p in PROFILE_DIR.glob("*.yaml")))
+        known = ", ".join(shipped())
         raise ProfileError(f"profile {name_or_path!r} not found (shipped profiles: {known})")
     text = path.read_text()
     try:
@@ -250,18 +250,23 @@ def profile_for(name_or_path: str | None, labels: list[str], log=None) -> Profil
         log.info("profile auto: %s fits the labels (another: --profile NAME or a YAML path)", profile.name)
     if profile is None:
         shown = ", ".join(labels[:30]) + (" ..." if len(labels) > 30 else "")
-        known = ", ".join(sorted(p.stem for p in PROFILE_DIR.glob("*.yaml")))
+        known = ", ".join(shipped())
         raise ProfileError(f"no shipped profile fits these labels ({shown}); shipped: {known}. Write one for "
                            f"your marker set (README, 'Your own marker set') and name it in the profile param")
     return profile
+
+
+def shipped() -> list[str]:
+    """The names of the profiles that come with the project (profiles/)."""
+    return sorted(p.stem for p in PROFILE_DIR.glob("*.yaml"))
 
 
 def detect_profile(labels: list[str]) -> Profile | None:
     """The shipped profile that fits these labels: of those whose every landmark is in the stream, the
     one that uses the most labels. None when no shipped profile fits."""
     best, best_used = None, 0
-    for path in sorted(PROFILE_DIR.glob("*.yaml")):
-        profile = load_profile(path)
+    for name in shipped():
+        profile = load_profile(name)
         try:
             profile.resolve(labels)
         except ProfileError:

@@ -123,3 +123,10 @@ def test_profile_init_drafts_a_profile_that_locates_what_the_shipped_one_does(tm
     assert located["draft"] >= 0.9 * located["shipped"], located
     assert "# Not found" in out.read_text() and "guessed from" in out.read_text()
     assert mocap("profile", "init", str(data_file(take)), "-o", str(out)).returncode == 1   # never overwrites
+
+
+def test_the_landmarks_page_is_what_profile_explain_makes():
+    from mocap_cli.profile_cmd import landmarks_page
+
+    assert (REPO / "docs" / "landmarks.md").read_text() == landmarks_page(), \
+        "re-make it: mocap profile explain --markdown > docs/landmarks.md"
