@@ -28,8 +28,8 @@ PACKAGE = Path(__file__).resolve().parent
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
 # Every solver is a part (a test checks). The longest to compile come first, so that spread over the
 # cores the last one to finish starts early.
-PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "ccd", "fabrik", "jacobian_transpose", "dls",
-         "pair_guard", "rotations")
+PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "ccd", "fabrik", "jacobian_transpose",
+         "dls", "pair_guard", "rotations")
 # One limb-fill kernel serves every solver and option (the solver and the fills are its arguments): these
 # parts compile it once, in one process, or two processes would compile the same kernel at the same time.
 FILL_PARTS = ("beyond", "ccd", "fabrik", "jacobian_transpose", "dls")
@@ -55,7 +55,10 @@ def fill_parts(options, solver: str) -> tuple[str, ...]:
     runs less of itself with the thesis's options than with any other."""
     from mocap_core.fill_options import FillOptions
 
-    return (solver,) if FillOptions.of(options) == FillOptions() else ("beyond",)
+    fills = FillOptions.of(options)
+    if fills == FillOptions():
+        return (solver,)
+    return ("beyond", "blend") if fills.reacquire_step_m > 0 or fills.blend_half_life_s > 0 else ("beyond",)
 
 
 def pipeline_parts(preset: str, solver: str, fill_gaps: bool = True) -> tuple[str, ...]:
@@ -79,10 +82,11 @@ def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
 
 def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
-    pair guard, the fit, the rotation conversions of the messages, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with
+    pair guard, the fit, the rotation conversions of the messages, the blend at a gap's ends, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with
     the analytic fills of the studio options)."""
     warm = {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
-            "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations}.get(part)
+            "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations,
+            "blend": _warm_blend}.get(part)
     if warm is not None:
         warm()
     else:
@@ -158,13 +162,26 @@ def _warm_rotations() -> None:  # frames <-> quaternions, as the skeleton messag
     quats_to_frames(frames_to_quats(np.tile(np.eye(3), (N_JOINTS, 1, 1))))
 
 
+def _warm_blend() -> None:
+    from mocap_core.blend import BlendState
+    from mocap_core.fill_options import STUDIO
+    from mocap_core.skeleton import N_JOINTS, Status
+
+    blend = BlendState.empty(3, STUDIO.reacquire_step_m, STUDIO.blend_half_life_s, STUDIO.blend_course)
+    pos, frames = np.zeros((N_JOINTS, 3)), np.tile(np.eye(3), (N_JOINTS, 1, 1))
+    status, idx = np.full(N_JOINTS, Status.LOCATED, np.uint8), np.arange(3, dtype=np.int64)
+    blend.blend(pos, status, idx, frames)
+
+
 def _warm_solver(part: str) -> None:
     from mocap_core.body_model import MIN_SAMPLES
     from mocap_core.fill_options import STUDIO, FillOptions
     from mocap_core.gapfill import LimbFiller
     from mocap_core.skeleton import N_JOINTS, Status
 
-    solver, options = ("ccd", STUDIO) if part == "beyond" else (part, FillOptions())
+    # ("beyond": the studio's fills; their blend is a part of its own, compiled beside them)
+    solver, options = ("ccd", STUDIO.model_copy(update={"reacquire_step_m": 0.0, "blend_half_life_s": 0.0})) \
+        if part == "beyond" else (part, FillOptions())
     filler = LimbFiller("left_leg", solver, options=options)
     pos = np.zeros((N_JOINTS, 3))
     frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))

@@ -56,5 +56,5 @@ def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
         assert set(cls.kernels(params)) <= set(warmup.PARTS), kind
     assert warmup.pipeline_parts("thesis", "dls") == ("localization", "rotations", "dls")
     assert set(warmup.pipeline_parts("studio", "ccd")) == {"localization", "rotations", "rebuild", "pose_memory",
-                                                          "pair_guard", "beyond"}
+                                                          "pair_guard", "beyond", "blend"}
     assert warmup.pipeline_parts("studio", "ccd", fill_gaps=False) == ("localization", "rotations")
