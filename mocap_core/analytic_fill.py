@@ -306,7 +306,8 @@ def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, p
     parent_now = frames[parent].copy()
     if not (all_finite(parent_now) and all_finite(prev_parent)):
         return 0
-    n, filled, k = idx.shape[0], 0, np.int64(1)  # int64 from the start: a literal would compile each kernel it reaches twice
+    # (k an int64 from the start: a literal would compile each kernel it reaches twice)
+    n, filled, k = idx.shape[0], 0, np.int64(1)
     while k < n - 1:
         if not (status[idx[k]] == MISSING and status[idx[k - 1]] != MISSING):
             k += 1

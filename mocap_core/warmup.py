@@ -33,6 +33,7 @@ PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "cc
 # One limb-fill kernel serves every solver and option (the solver and the fills are its arguments): these
 # parts compile it once, in one process, or two processes would compile the same kernel at the same time.
 FILL_PARTS = ("beyond", "ccd", "fabrik", "jacobian_transpose", "dls")
+FIT_PARTS = ("fit", "localization", "rotations")  # the fit localizes the frames that calibrate it
 
 
 def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = True) -> None:
@@ -82,8 +83,9 @@ def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
 
 def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
-    pair guard, the fit, the rotation conversions of the messages, the blend at a gap's ends, or one solve on a chain with a missing middle joint (a solver by name; "beyond": CCD with
-    the analytic fills of the studio options)."""
+    pair guard, the fit, the rotation conversions of the messages, the blend at a gap's ends, or one solve on a
+    chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic fills of the studio
+    options)."""
     warm = {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
             "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations,
             "blend": _warm_blend}.get(part)
@@ -211,20 +213,21 @@ def kernels_cached(parts: tuple[str, ...] = PARTS) -> bool:
     return set(parts) <= _stamped()
 
 
-def _stamped() -> set[str]:
-    """The parts the stamp says are compiled for these very sources."""
+def _stamped(sources: str | None = None) -> set[str]:
+    """The parts the stamp says are compiled for these very sources (their fingerprint, if already taken)."""
     try:
         lines = STAMP.read_text().splitlines()
     except OSError:
         return set()
-    return set(lines[1:]) if lines and lines[0] == fingerprint() else set()
+    return set(lines[1:]) if lines and lines[0] == (sources or fingerprint()) else set()
 
 
 def _write_stamp(parts: tuple[str, ...]) -> None:
     try:
         STAMP.parent.mkdir(parents=True, exist_ok=True)
         part = STAMP.with_name(f"{STAMP.name}.{os.getpid()}")  # then renamed: node processes read it meanwhile
-        part.write_text("\n".join([fingerprint(), *sorted(_stamped() | set(parts))]) + "\n")
+        sources = fingerprint()  # (reads every kernel module: once)
+        part.write_text("\n".join([sources, *sorted(_stamped(sources) | set(parts))]) + "\n")
         os.replace(part, STAMP)
     except OSError:
         pass  # a read-only checkout: the launcher will just compile (or load) up front each time

@@ -257,7 +257,7 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
     try:
         for current in loops:
             try:
-                warm_up(type(current.node).kernels(current.node.params))
+                warm_up(type(current.node).kernels(current.node.params), stamp=False)  # (the launcher stamps)
                 current.node.setup()
             except KeyboardInterrupt:  # Ctrl-C while starting: the whole process group was asked to stop
                 return 0

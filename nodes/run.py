@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         # of the node it has to replace on stdin (the launcher's; python start-up alone takes ~1.5 s).
         from mocap_core.warmup import PARTS, warm_up
 
-        warm_up(PARTS if len(argv) < 3 else tuple(k for k in argv[2].split(",") if k))
+        warm_up(PARTS if len(argv) < 3 else tuple(k for k in argv[2].split(",") if k), stamp=False)
         if len(argv) >= 2:
             _tell_launcher_warm(argv[1])
         try:

@@ -16,6 +16,7 @@ from mocap_core.fit.fitter import FitSettings
 from mocap_core.fit.live import LiveFit, LiveSettings
 from mocap_core.fit.subject import load_subject
 from mocap_core.profiles import AUTO, load_profile, profile_for
+from mocap_core.warmup import FIT_PARTS
 from nodes.runtime import Node
 from nodes.skeleton_codec import to_message
 
@@ -38,7 +39,7 @@ class SkeletonFit(Node):
 
     @classmethod
     def kernels(cls, params):
-        return ("fit", "localization", "rotations")  # it localizes the frames that calibrate it
+        return FIT_PARTS
 
     def setup(self) -> None:
         if self.params.profile != AUTO:
