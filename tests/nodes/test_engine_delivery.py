@@ -65,9 +65,11 @@ def _run(tmp_path, rate_hz: float, cap_hz: float, seconds: float, viewer_port: i
 
 
 def _steady_rate(arrivals: np.ndarray) -> float:
-    """Frames a second over the run's second half (the graph's start-up excluded)."""
+    """The pace of the frames over the run's second half (the graph's start-up excluded), from their median
+    interval: vmc keeps only the newest frame, so one it could not send in time on a busy machine leaves a gap in
+    the stream, not a slower pace."""
     t = arrivals[arrivals >= arrivals[0] + (arrivals[-1] - arrivals[0]) / 2]
-    return (len(t) - 1) / (t[-1] - t[0])
+    return 1.0 / float(np.median(np.diff(t)))
 
 
 @pytest.mark.timeout(300)
