@@ -258,18 +258,36 @@ def hip_centres(lm):
 
 @njit(cache=True, inline="always")  # its one caller is the batch: compiled once, there
 def _localize_frame(lm, pos, frames, used, body, sums, counts):
-    height_given, mass_given, marker_r = body[0], body[1], body[2]
-    elbow_off, knee_off, ankle_off = body[3] + marker_r, body[4] + marker_r, body[5] + marker_r
-
-    sacr, lias, rias = lm[SACR], lm[L_IAS], lm[R_IAS]
+    marker_r = body[2]
     r_hip, left_hip, right_hip = hip_centres(lm)
-    left, up, fwd = r_hip[:, 0].copy(), r_hip[:, 1].copy(), r_hip[:, 2].copy()
     hips = (left_hip, right_hip)
     pos[J_PELVIS] = 0.5 * (hips[0] + hips[1])
     frames[J_PELVIS] = r_hip
+    r_chest, sc, n_vec = _trunk(lm, pos, frames, r_hip, hips, sums, counts)
+    _head(lm, pos, frames, sc, r_chest)
+    height, mass, cd, sw = _body_sizes(lm, body, n_vec, sums, counts)
+    used[0], used[1], used[2], used[3] = height, mass, cd, sw
+    # shoulders (3.4.2; Campbell et al. 2009) from the acromion, in the chest frame: medial, up, forward
+    acromion_to_joint = np.array([(96.2 - 0.302 * cd - 0.364 * height + 0.385 * mass) / 1000,
+                                  (-66.32 + 0.30 * cd - 0.432 * mass) / 1000,
+                                  (66.468 - 0.531 * sw + 0.571 * mass) / 1000])
+    for side in range(2):
+        _arm(lm, pos, frames, side, sc, r_chest, acromion_to_joint, body[3] + marker_r)
+        _leg(lm, pos, frames, side, r_hip, hips, body[4] + marker_r, body[5] + marker_r)
+    # a joint whose position could not be computed is missing, frame included
+    for j in range(pos.shape[0]):
+        if not _ok(pos[j]):
+            pos[j] = np.nan
+            frames[j] = np.nan
 
-    # chest frame (facts 7.4 ChestOrientation), sternum-clavicle point, spine (3.4.3)
-    tv2, tv12, sme, lsae, rsae = lm[TV2], lm[TV12], lm[SME], lm[SIDE_MARKS[0, M_SAE]], lm[SIDE_MARKS[1, M_SAE]]
+
+@njit(cache=True, inline="always")
+def _trunk(lm, pos, frames, r_hip, hips, sums, counts):
+    """The chest frame (facts 7.4 ChestOrientation), the sternum-clavicle point and the spine (3.4.3); returns
+    the chest frame, the sternum-clavicle point and the running neck-to-chest vector in the chest frame."""
+    sacr, tv2, tv12, sme = lm[SACR], lm[TV2], lm[TV12], lm[SME]
+    lsae, rsae = lm[SIDE_MARKS[0, M_SAE]], lm[SIDE_MARKS[1, M_SAE]]
+    left, up, fwd = r_hip[:, 0].copy(), r_hip[:, 1].copy(), r_hip[:, 2].copy()
     chest_y = 0.5 * (lsae + rsae) - sacr
     for cand in (0.5 * (tv2 + tv12) - sacr, tv2 - sacr, tv12 - sacr, up):
         chest_y = _first2(chest_y, cand)
@@ -277,7 +295,7 @@ def _localize_frame(lm, pos, frames, used, body, sums, counts):
     for cand in (0.5 * (sme + tv2) - rsae, lsae - 0.5 * (sme + tv2), left):
         chest_x = _first2(chest_x, cand)
     r_chest = _frame_yx(chest_y, chest_x)
-    c_left, c_up, c_fwd = r_chest[:, 0].copy(), r_chest[:, 1].copy(), r_chest[:, 2].copy()
+    c_fwd = r_chest[:, 2].copy()
     neck_to_chest = mtv(r_chest, sme - tv2)
     n_vec = _running(sums, counts, 0, 3, 0, neck_to_chest)
     n_world = mv(r_chest, n_vec)
@@ -286,22 +304,34 @@ def _localize_frame(lm, pos, frames, used, body, sums, counts):
         sc = _first2(sc, cand)
     spine0 = sacr + MARKER_TO_SPINE_M * fwd
     spine1 = tv12 + MARKER_TO_SPINE_M * fwd
-    neck = sc + NECK_ABOVE_STERNUM_M * c_up
     pos[J_SPINE0], frames[J_SPINE0] = spine0, _frame_yz(_first2(spine1, sc) - spine0, fwd)
     pos[J_SPINE1], frames[J_SPINE1] = spine1, _frame_yx(sc - spine1, hips[0] - hips[1])
     pos[J_SPINE3], frames[J_SPINE3] = sc, r_chest
+    return r_chest, sc, n_vec
 
-    # head (3.4.4); without a forehead marker the head's up axis is neck->head
+
+@njit(cache=True, inline="always")
+def _head(lm, pos, frames, sc, r_chest):
+    """The neck above the sternum-clavicle point and the head (3.4.4); without a forehead marker the head's up
+    axis is neck->head."""
+    neck = sc + NECK_ABOVE_STERNUM_M * r_chest[:, 1].copy()
     lhead, rhead, sgl = lm[HEAD_MARK[0]], lm[HEAD_MARK[1]], lm[SGL]
     head = 0.5 * (lhead + rhead)
     r_head = _frame_zx(sgl - head, lhead - rhead)
     if not _frame_ok(r_head):
         r_head = _frame_yx(head - neck, lhead - rhead)
-    pos[J_NECK], frames[J_NECK] = neck, _frame_yz(head - neck, c_fwd)
+    pos[J_NECK], frames[J_NECK] = neck, _frame_yz(head - neck, r_chest[:, 2].copy())
     pos[J_HEAD], frames[J_HEAD] = head, r_head
     pos[J_HEAD_TOP], frames[J_HEAD_TOP] = head + HEAD_TOP_ABOVE_HEAD_M * r_head[:, 1], r_head
 
-    # body estimates (facts 7.3): chest depth, half shoulder width, height, mass
+
+@njit(cache=True, inline="always")
+def _body_sizes(lm, body, n_vec, sums, counts):
+    """(height cm, mass kg, chest depth mm, half shoulder width mm) (facts 7.3): the profile's where it gives
+    them, else running means of this stream's samples, else the defaults."""
+    height_given, mass_given = body[0], body[1]
+    sacr, lias, rias, tv2, sgl = lm[SACR], lm[L_IAS], lm[R_IAS], lm[TV2], lm[SGL]
+    lsae, rsae = lm[SIDE_MARKS[0, M_SAE]], lm[SIDE_MARKS[1, M_SAE]]
     cd = vnorm(n_vec) * 1000 if _ok(n_vec) else DEFAULT_CHEST_DEPTH_MM
     sw = _running(sums, counts, 3, 4, 1, np.array([vnorm(lsae - rsae) * 500]))[0]
     if not np.isfinite(sw):
@@ -315,7 +345,7 @@ def _localize_frame(lm, pos, frames, used, body, sums, counts):
             leg = vnorm(lm[Lt[M_FAL]] - lm[Lt[M_FLE]]) + vnorm(lm[Lt[M_FLE]] - lias)
         trunk = vnorm(sacr - tv2) + vnorm(tv2 - sgl)
         if not np.isfinite(trunk):
-            trunk = vnorm(sacr - _first2(sgl, head))
+            trunk = vnorm(sacr - _first2(sgl, 0.5 * (lm[HEAD_MARK[0]] + lm[HEAD_MARK[1]])))
         sample = (leg + trunk) * 100
         if not sample < 250:
             sample = np.nan
@@ -323,59 +353,58 @@ def _localize_frame(lm, pos, frames, used, body, sums, counts):
         if not np.isfinite(height):
             height = DEFAULT_HEIGHT_CM
     mass = mass_given if np.isfinite(mass_given) else (height / 100) ** 2 * BMI
-    used[0], used[1], used[2], used[3] = height, mass, cd, sw
+    return height, mass, cd, sw
 
-    # shoulders (3.4.2; Campbell et al. 2009) from the acromion, in the chest frame
-    gx = (96.2 - 0.302 * cd - 0.364 * height + 0.385 * mass) / 1000   # medial
-    gy = (-66.32 + 0.30 * cd - 0.432 * mass) / 1000                   # up
-    gz = (66.468 - 0.531 * sw + 0.571 * mass) / 1000                  # forward
 
-    for side in range(2):
-        M, J = SIDE_MARKS[side], SIDE_JOINTS[side]
-        arm_sign = 1.0 if side == 0 else -1.0          # flexion-axis sign that points medially
-        medial_trunk = -c_left if side == 0 else c_left
-        medial_pelvis = -left if side == 0 else left
+@njit(cache=True, inline="always")
+def _arm(lm, pos, frames, side, sc, r_chest, acromion_to_joint, elbow_off):
+    """One arm (3.4.2, 3.4.6, 3.4.7): the clavicle from the sternum-clavicle point, the shoulder from the
+    acromion (``acromion_to_joint``: medial, up, forward in the chest frame), the elbow, wrist and hand."""
+    M, J = SIDE_MARKS[side], SIDE_JOINTS[side]
+    arm_sign = 1.0 if side == 0 else -1.0          # flexion-axis sign that points medially
+    c_left, c_up, c_fwd = r_chest[:, 0].copy(), r_chest[:, 1].copy(), r_chest[:, 2].copy()
+    medial_trunk = -c_left if side == 0 else c_left
+    gx, gy, gz = acromion_to_joint[0], acromion_to_joint[1], acromion_to_joint[2]
+    shoulder = lm[M[M_SAE]] + gx * medial_trunk + gy * c_up + gz * c_fwd
+    hle, hme, rsp, usp, hand = lm[M[M_HLE]], lm[M[M_HME]], lm[M[M_RSP]], lm[M[M_USP]], lm[M[M_HM2]]
+    wrist = 0.5 * (rsp + usp)
+    elbow_fb, medial_fb = _hinge_from_lateral(shoulder, hle, wrist, arm_sign, medial_trunk, elbow_off)
+    medial = _first2(_unit(hme - hle), medial_fb)
+    elbow = _first2(0.5 * (hle + hme), elbow_fb)
+    right = medial if side == 0 else -medial
+    radial = rsp - usp
+    r_wrist = _frame_yz(hand - wrist, radial)
+    pos[J[S_CLAV]], frames[J[S_CLAV]] = sc, _frame_yz(shoulder - sc, c_fwd)
+    pos[J[S_SHOULDER]], frames[J[S_SHOULDER]] = shoulder, _frame_yx(elbow - shoulder, right)
+    pos[J[S_ELBOW]], frames[J[S_ELBOW]] = elbow, _frame_yz(wrist - elbow, radial)
+    pos[J[S_WRIST]], frames[J[S_WRIST]] = wrist, r_wrist
+    pos[J[S_HAND]], frames[J[S_HAND]] = hand, r_wrist
 
-        # arms (3.4.6, 3.4.7)
-        shoulder = lm[M[M_SAE]] + gx * medial_trunk + gy * c_up + gz * c_fwd
-        hle, hme, rsp, usp, hand = lm[M[M_HLE]], lm[M[M_HME]], lm[M[M_RSP]], lm[M[M_USP]], lm[M[M_HM2]]
-        wrist = 0.5 * (rsp + usp)
-        elbow_fb, medial_fb = _hinge_from_lateral(shoulder, hle, wrist, arm_sign, medial_trunk, elbow_off)
-        medial = _first2(_unit(hme - hle), medial_fb)
-        elbow = _first2(0.5 * (hle + hme), elbow_fb)
-        right = medial if side == 0 else -medial
-        radial = rsp - usp
-        r_wrist = _frame_yz(hand - wrist, radial)
-        pos[J[S_CLAV]], frames[J[S_CLAV]] = sc, _frame_yz(shoulder - sc, c_fwd)
-        pos[J[S_SHOULDER]], frames[J[S_SHOULDER]] = shoulder, _frame_yx(elbow - shoulder, right)
-        pos[J[S_ELBOW]], frames[J[S_ELBOW]] = elbow, _frame_yz(wrist - elbow, radial)
-        pos[J[S_WRIST]], frames[J[S_WRIST]] = wrist, r_wrist
-        pos[J[S_HAND]], frames[J[S_HAND]] = hand, r_wrist
 
-        # legs (3.4.5, 3.4.7)
-        hip = hips[side]
-        fle, fme, ttc = lm[M[M_FLE]], lm[M[M_FME]], lm[M[M_TTC]]
-        fal, tam, fcc, fm2 = lm[M[M_FAL]], lm[M[M_TAM]], lm[M[M_FCC]], lm[M[M_FM2]]
-        knee_fb, kmedial_fb = _hinge_from_lateral(hip, fle, fal, -arm_sign, medial_pelvis, knee_off)
-        kmedial = _first2(_unit(fme - fle), kmedial_fb)
-        # regression e2 signs: + is medial for the left knee and the right ankle (docs/solving.md)
-        knee = _first2(0.5 * (fle + fme), _first2(_regression(fle, fal, ttc, True, -0.1033, arm_sign * 0.09814, 0.0597),
-                                                  knee_fb))
-        amedial = _first2(_unit(tam - fal), _unit(_reject(kmedial, _unit(fal - fle))))
-        ankle = _first2(0.5 * (fal + tam), _first2(_regression(fle, fal, ttc, False, -0.07675, -arm_sign * 0.05482,
-                                                               -0.02741), fal + ankle_off * amedial))
-        foot = _first2(0.4 * fcc + 0.6 * fm2, 0.4 * ankle + 0.6 * fm2)
-        kright = kmedial if side == 0 else -kmedial
-        aright = amedial if side == 0 else -amedial
-        r_foot = _frame_yz(fm2 - foot, knee - ankle)
-        pos[J[S_HIP]], frames[J[S_HIP]] = hip, _frame_yx(knee - hip, hips[1] - hips[0])
-        pos[J[S_KNEE]], frames[J[S_KNEE]] = knee, _frame_yx(ankle - knee, kright)
-        pos[J[S_ANKLE]], frames[J[S_ANKLE]] = ankle, _frame_yx(foot - ankle, aright)
-        pos[J[S_FOOT]], frames[J[S_FOOT]] = foot, r_foot
-        pos[J[S_TOE]], frames[J[S_TOE]] = fm2, r_foot
-
-    # a joint whose position could not be computed is missing, frame included
-    for j in range(pos.shape[0]):
-        if not _ok(pos[j]):
-            pos[j] = np.nan
-            frames[j] = np.nan
+@njit(cache=True, inline="always")
+def _leg(lm, pos, frames, side, r_hip, hips, knee_off, ankle_off):
+    """One leg (3.4.5, 3.4.7): hip, knee, ankle, foot and toe."""
+    M, J = SIDE_MARKS[side], SIDE_JOINTS[side]
+    arm_sign = 1.0 if side == 0 else -1.0
+    left = r_hip[:, 0].copy()
+    medial_pelvis = -left if side == 0 else left
+    hip = hips[side]
+    fle, fme, ttc = lm[M[M_FLE]], lm[M[M_FME]], lm[M[M_TTC]]
+    fal, tam, fcc, fm2 = lm[M[M_FAL]], lm[M[M_TAM]], lm[M[M_FCC]], lm[M[M_FM2]]
+    knee_fb, kmedial_fb = _hinge_from_lateral(hip, fle, fal, -arm_sign, medial_pelvis, knee_off)
+    kmedial = _first2(_unit(fme - fle), kmedial_fb)
+    # regression e2 signs: + is medial for the left knee and the right ankle (docs/solving.md)
+    knee = _first2(0.5 * (fle + fme), _first2(_regression(fle, fal, ttc, True, -0.1033, arm_sign * 0.09814, 0.0597),
+                                              knee_fb))
+    amedial = _first2(_unit(tam - fal), _unit(_reject(kmedial, _unit(fal - fle))))
+    ankle = _first2(0.5 * (fal + tam), _first2(_regression(fle, fal, ttc, False, -0.07675, -arm_sign * 0.05482,
+                                                           -0.02741), fal + ankle_off * amedial))
+    foot = _first2(0.4 * fcc + 0.6 * fm2, 0.4 * ankle + 0.6 * fm2)
+    kright = kmedial if side == 0 else -kmedial
+    aright = amedial if side == 0 else -amedial
+    r_foot = _frame_yz(fm2 - foot, knee - ankle)
+    pos[J[S_HIP]], frames[J[S_HIP]] = hip, _frame_yx(knee - hip, hips[1] - hips[0])
+    pos[J[S_KNEE]], frames[J[S_KNEE]] = knee, _frame_yx(ankle - knee, kright)
+    pos[J[S_ANKLE]], frames[J[S_ANKLE]] = ankle, _frame_yx(foot - ankle, aright)
+    pos[J[S_FOOT]], frames[J[S_FOOT]] = foot, r_foot
+    pos[J[S_TOE]], frames[J[S_TOE]] = fm2, r_foot
