@@ -3,6 +3,26 @@ was heading, and the offset to the new source dies out as a critically damped sp
 engines do); after a loss it leaves its markers' course for the fill only as that course grows less trustworthy
 than the fill has been. Bone frames are blended the same way. Numba kernels; gapfill.LimbFiller keeps a
 BlendState per limb and calls BlendState.blend after the fills (mocap_core.analytic_fill, the IK solvers).
+
+With a half-life (blend_half_life_s) the output is the source (markers, or a fill's estimate) plus an offset. Where
+the markers are lost or come back, the offset takes in the jump: the new source less where the old one was heading
+(its last position plus its own last step), so the output goes on as it went. The offset then dies out as a
+critically damped spring (Holden's, exact for any ``dt``), by at most ``step`` a frame when that is set (or
+PACE_SHARE of the source's own step, if more). At loss the offset is the truth the estimate has not got: over a
+short gap it keeps the joint near its markers' last course. After a loss the output also stays on that course (the
+markers' last step, on and on), leaving it for the fill as course_weight says, which learns from the joint how fast
+its markers turn and how far its fill missed them where they came back (``trust``); ``step`` caps that too. Markers
+that come back while the output is still leaving that course are met from the output as it went (its own last
+step), not as the fill went; markers back within FLICKER_FRAMES of their last sighting are met at their own step
+across the gap. An estimate that leaves its course faster than SOURCE_JUMP_M_S has changed source (a held hand
+carried by another bone) and is met the same way; one handed between fills (estimated, held) without such a jump
+has its jump taken into the offset. An estimate given up for a hold starts a course as a loss does, its step dying
+out, and one back from a hold ends a course as returning markers do. The course of a lone joint between two located
+ones keeps its distances to them, on their circle; out of their reach, it moves with their line. One whose parent
+alone is located keeps its distance to it, unless that is the limb's root, and moves with it: its step is its
+markers' last step relative to the parent's then, plus the parent's now. While a fill stands in, the output stays
+within MAX_APART_M of it. A flickering marker swings the offset back and forth by the two sources' difference:
+nothing builds up.
 """
 from __future__ import annotations
 
@@ -426,28 +446,7 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
     had it and close the gap by at most ``step`` metres a frame (a rate-limited decaying offset).
-    With ``omega`` > 0 (blend_half_life_s): the output is the source (markers, or a fill's estimate) plus an
-    offset. Where the markers are lost or come back, the offset takes in the jump: the new source less where the
-    old one was heading (its last position plus its own last step), so the output goes on as it went. The offset
-    then dies out as a critically damped spring (Holden's, exact for any ``dt``), by at most ``step`` a frame
-    when that is set (or PACE_SHARE of the source's own step, if more). At loss the offset is the truth the
-    estimate has not got: over a short gap it keeps the joint near its markers' last course. After a loss the
-    output also stays on that course (the markers' last step, on and on), leaving it for the fill as
-    course_weight says, which learns from the joint how fast its markers turn and how far its fill missed them
-    where they came back (``trust``); ``step`` caps that too. Markers that come back while the output is still
-    leaving that course are met from the output as it
-    went (its own last step), not as the fill went; markers back within FLICKER_FRAMES of their last sighting are
-    met at their own step across the gap. An estimate that leaves its course faster than
-    SOURCE_JUMP_M_S has changed source (a held hand carried by another bone) and is met the same way; one handed
-    between fills (estimated, held) without such a jump has its jump taken into
-    the offset. An estimate given up for a hold starts a course as a
-    loss does, its step dying out, and one back from a hold ends a course as
-    returning markers do. The course of a lone joint between two located ones keeps its distances to
-    them, on their circle; out of their reach, it moves with their line. One whose parent
-    alone is located keeps its distance to it, unless that is the limb's root, and moves with it: its step
-    is its markers' last step relative to the parent's then, plus the parent's now. While a fill stands in,
-    the output stays within MAX_APART_M of it. A flickering marker swings the offset back and forth by
-    the two sources' difference: nothing builds up.
+    With ``omega`` > 0 (blend_half_life_s): the spring, as the module's docstring tells.
     State per joint: ``last_out`` and ``out_step``, the output's last position and step; ``last_raw`` and
     ``raw_vel``, the source's; ``seen_raw`` and ``seen_age``, the last position of each kind of source
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the

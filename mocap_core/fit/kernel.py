@@ -177,74 +177,105 @@ def fit_pose(root, R, x, bone, c, parent, offsets, slot, up, chains, rotating,
     """One frame's fit, in place on ``root`` (3,) and ``R`` (J, 3, 3); ``P`` gets the joints, ``weights`` (M,)
     each marker's final robust weight (0 for an unseen or unassigned marker). Returns (iterations, residual
     RMS of the seen markers in metres)."""
-    J = R.shape[0]
+    markers = (x, bone, c, w_marker)
+    tree = (parent, offsets, slot, chains, rotating)
+    motion = (root_pred, L_pred, w_rot, w_root, L_rest, w_rest)
     n = slot.max() + 3
-    M = x.shape[0]
-    depth = chains.shape[1]
     it = 0
     for it in range(1, max_iterations + 1):
         forward(root, R, parent, offsets, P)
         H = np.zeros((n, n))
         g = np.zeros(n)
-        a = np.empty((depth, 3))
-        for m in range(M):
-            b = bone[m]
-            weights[m] = 0.0
-            if b < 0 or not (np.isfinite(x[m, 0]) and np.isfinite(x[m, 1]) and np.isfinite(x[m, 2])):
-                continue
-            pos = P[b] + mv(R[b], c[m])
-            r = x[m] - pos
-            e = vnorm(r) / robust_m
-            w = w_marker[m] / (1.0 + e * e)
-            weights[m] = 1.0 / (1.0 + e * e)
-            for i in range(depth):
-                k = chains[b, i]
-                if k < 0:
-                    break
-                a[i] = pos - P[k]
-            _accumulate(H, g, slot, chains[b], a, r, w)
-        # the motion task: each bone's local rotation (the root's world one) near its prediction
-        for i in range(3):
-            H[i, i] += w_root
-            g[i] += w_root * (root_pred[i] - root[i])
-        for k in range(J):
-            if not rotating[k]:
-                continue
-            s = slot[k]
-            p = parent[k]
-            for target, w in ((L_pred[k], w_rot[k]), (L_rest[k], w_rest[k])):
-                if p < 0:
-                    t = logm(mm(target, R[k].T))
-                else:
-                    t = mv(R[p], logm(mm(target, mm(R[p].T, R[k]).T)))
-                for i in range(3):
-                    H[s + i, s + i] += w
-                    g[s + i] += w * t[i]
-        d = tree_solve(H, g, up)
-        root += d[:3]
-        old = R.copy()
-        for k in range(J):
-            p = parent[k]
-            if not rotating[k]:
-                R[k] = R[p]
-                continue
-            turn = expm(d[slot[k]:slot[k] + 3])
-            if p < 0:
-                R[k] = _orthonormal(mm(turn, old[k]))
-            else:
-                R[k] = _orthonormal(mm(R[p], mm(old[p].T, mm(turn, old[k]))))
-        step = 0.0
-        for i in range(n):
-            step = max(step, abs(d[i]))
-        if step < tolerance:
+        _marker_task(H, g, P, R, markers, tree, robust_m, weights)
+        _motion_task(H, g, root, R, motion, tree)
+        if _step(root, R, tree_solve(H, g, up), tree) < tolerance:
             break
     forward(root, R, parent, offsets, P)
+    return it, _residual_rms(P, R, markers)
+
+
+@njit(cache=True, inline="always")
+def _marker_task(H, g, P, R, markers, tree, robust_m, weights):
+    """Add every seen marker's residual from its calibrated place to the normal equations (H, g), Cauchy-weighted
+    by ``robust_m``; ``weights`` gets each marker's robust weight (0: unseen or on no bone)."""
+    x, bone, c, w_marker = markers
+    chains, slot = tree[3], tree[2]
+    a = np.empty((chains.shape[1], 3))
+    for m in range(x.shape[0]):
+        b = bone[m]
+        weights[m] = 0.0
+        if b < 0 or not (np.isfinite(x[m, 0]) and np.isfinite(x[m, 1]) and np.isfinite(x[m, 2])):
+            continue
+        pos = P[b] + mv(R[b], c[m])
+        r = x[m] - pos
+        e = vnorm(r) / robust_m
+        w = w_marker[m] / (1.0 + e * e)
+        weights[m] = 1.0 / (1.0 + e * e)
+        for i in range(chains.shape[1]):
+            k = chains[b, i]
+            if k < 0:
+                break
+            a[i] = pos - P[k]
+        _accumulate(H, g, slot, chains[b], a, r, w)
+
+
+@njit(cache=True, inline="always")
+def _motion_task(H, g, root, R, motion, tree):
+    """The motion and posture tasks: each bone's local rotation (the root's world one) near its prediction and
+    near the subject's usual one, the root near its predicted position."""
+    root_pred, L_pred, w_rot, w_root, L_rest, w_rest = motion
+    parent, slot, rotating = tree[0], tree[2], tree[4]
+    for i in range(3):
+        H[i, i] += w_root
+        g[i] += w_root * (root_pred[i] - root[i])
+    for k in range(R.shape[0]):
+        if not rotating[k]:
+            continue
+        s = slot[k]
+        p = parent[k]
+        for target, w in ((L_pred[k], w_rot[k]), (L_rest[k], w_rest[k])):
+            if p < 0:
+                t = logm(mm(target, R[k].T))
+            else:
+                t = mv(R[p], logm(mm(target, mm(R[p].T, R[k]).T)))
+            for i in range(3):
+                H[s + i, s + i] += w
+                g[s + i] += w * t[i]
+
+
+@njit(cache=True, inline="always")
+def _step(root, R, d, tree):
+    """Apply the step ``d`` (the root's move, then each rotating bone's world-frame turn); returns its largest
+    component."""
+    parent, slot, rotating = tree[0], tree[2], tree[4]
+    root += d[:3]
+    old = R.copy()
+    for k in range(R.shape[0]):
+        p = parent[k]
+        if not rotating[k]:
+            R[k] = R[p]
+            continue
+        turn = expm(d[slot[k]:slot[k] + 3])
+        if p < 0:
+            R[k] = _orthonormal(mm(turn, old[k]))
+        else:
+            R[k] = _orthonormal(mm(R[p], mm(old[p].T, mm(turn, old[k]))))
+    step = 0.0
+    for i in range(d.shape[0]):
+        step = max(step, abs(d[i]))
+    return step
+
+
+@njit(cache=True, inline="always")
+def _residual_rms(P, R, markers):
+    """RMS (m) of the seen markers off their calibrated places; NaN when none is seen."""
+    x, bone, c, _ = markers
     total, count = 0.0, 0
-    for m in range(M):
+    for m in range(x.shape[0]):
         b = bone[m]
         if b < 0 or not np.isfinite(x[m, 0]):
             continue
         r = x[m] - (P[b] + mv(R[b], c[m]))
         total += r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
         count += 1
-    return it, math.sqrt(total / count) if count else math.nan
+    return math.sqrt(total / count) if count else math.nan

@@ -143,26 +143,16 @@ def solve(solver, P, R, target, limits, params, escape_patience=2):
     out of reach within the limits, and the best pose is returned."""
     constrained, max_iter, stop_m = params.constraints, params.max_iterations, params.stop_distance_m
     n = R.shape[0]
-    total = 0.0
-    for i in range(n):
-        total += vnorm(P[i + 1] - P[i])
-    reach = vnorm(target - P[0])
-    if reach >= total:
-        for i in range(n):
-            rotate_subchain(P, R, i, rotation_between(P[i + 1] - P[i], target - P[i]))
-        if constrained:
-            constrain_chain(P, R, limits)
-        return 0, vnorm(P[n] - target)
+    if vnorm(target - P[0]) >= _chain_length(P):
+        return 0, _stretch_at(P, R, target, limits, constrained)
     best = vnorm(P[n] - target)
     bestP, bestR = P.copy(), R.copy()
-    since_gain = 0          # iterations since the best distance since the last escape shrank by MIN_PROGRESS
-    since_best = 0          # ... since the best distance of the whole solve did
-    local = best
+    # iterations since the best distance since the last escape (``local``) shrank by MIN_PROGRESS, and since the
+    # best distance of the whole solve did
+    since_gain, since_best, local = 0, 0, best
     attempt = np.int64(0)  # int64 from the start: a literal would compile each kernel it reaches twice
-    fruitless = 0
-    best_at_escape = best
+    fruitless, best_at_escape, it = 0, best, 0
     window_best = best      # a limited non-CCD solver that does not halve its distance in a window crawls
-    it = 0
     while it < max_iter and best > stop_m:
         _step(solver, P, R, target, limits, constrained)
         it += 1
@@ -170,11 +160,7 @@ def solve(solver, P, R, target, limits, params, escape_patience=2):
         # Progress is judged against the best distance since the last escape, not the last step's:
         # a chain that oscillates against its limits (down 5 %, up 5 %, ...) is as stuck as one
         # that does not move, and used to crawl through all its iterations (1-4 ms a frame).
-        if dist < local * (1.0 - MIN_PROGRESS):
-            since_gain = 0
-            local = dist
-        else:
-            since_gain += 1
+        since_gain, local = (0, dist) if dist < local * (1.0 - MIN_PROGRESS) else (since_gain + 1, local)
         since_best = 0 if dist < best * (1.0 - MIN_PROGRESS) else since_best + 1
         if dist < best:
             best = dist
@@ -186,8 +172,7 @@ def solve(solver, P, R, target, limits, params, escape_patience=2):
             window_best = best
         # stuck, or an escape that has not beaten the best pose within a few iterations
         if (since_gain >= STALL_ITERATIONS or since_best >= 2 * STALL_ITERATIONS or crawling) and best > stop_m:
-            since_gain = 0
-            since_best = 0
+            since_gain, since_best = 0, 0
             P[:] = bestP
             R[:] = bestR
             if solver != CCD and constrained:
@@ -200,14 +185,41 @@ def solve(solver, P, R, target, limits, params, escape_patience=2):
                 continue
             fruitless = fruitless + 1 if best > best_at_escape * (1.0 - ESCAPE_GAIN) else 0
             best_at_escape = best
-            if fruitless > escape_patience:
-                break
-            if not escape_rotation(P, R, limits.ref0, attempt, params.escape_step_deg, params.escape_max_deg):
+            if fruitless > escape_patience or not _escape(P, R, limits, params, attempt):
                 break
             attempt += 1
-            if constrained:
-                constrain_chain(P, R, limits)
             local = vnorm(P[n] - target)  # progress is judged afresh from the turned pose
     P[:] = bestP
     R[:] = bestR
     return it, best
+
+
+@njit(cache=True, inline="always")
+def _chain_length(P):
+    total = 0.0
+    for i in range(P.shape[0] - 1):
+        total += vnorm(P[i + 1] - P[i])
+    return total
+
+
+@njit(cache=True, inline="always")
+def _stretch_at(P, R, target, limits, constrained):
+    """An unreachable target: the chain stretched straight at it, as in the thesis's code, then limited; returns
+    the distance left."""
+    n = R.shape[0]
+    for i in range(n):
+        rotate_subchain(P, R, i, rotation_between(P[i + 1] - P[i], target - P[i]))
+    if constrained:
+        constrain_chain(P, R, limits)
+    return vnorm(P[n] - target)
+
+
+@njit(cache=True, inline="always")
+def _escape(P, R, limits, params, attempt):
+    """The deadlock escape's ``attempt``-th turn of the whole chain, limited when the solve is; False when the
+    turns are used up."""
+    if not escape_rotation(P, R, limits.ref0, attempt, params.escape_step_deg, params.escape_max_deg):
+        return False
+    if params.constraints:
+        constrain_chain(P, R, limits)
+    return True
