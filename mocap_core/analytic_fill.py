@@ -265,20 +265,9 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
         u = on_circle_fitting(u, axis, radius, target - centre, ref_now, mean, weight, to_recalled, pull)
     if b == k + 1 and model_weight[k] > 0 and all_finite(modelled[k]):
         u = _turn_towards(u, axis, modelled[k] - centre, model_weight[k])
-    _place_run(centre + radius * u, (positions, frames, status), idx, (prev_pos, prev_frames, prev_parent),
-               parent_now, a, k, b)
-    return b - k
-
-
-@njit(cache=True, inline="always")
-def _place_run(joint, pose, idx, prev, parent_now, a, k, b):
-    """Joint k of the run a..b at ``joint``, the rest of the run in its last shape (``prev``: the limb's last
-    positions, frames and parent frame) turned with the plane of (a, k, b), the bones' frames turned alike."""
-    positions, frames, status = pose
-    prev_pos, prev_frames, prev_parent = prev
-    pa, pk, pb = prev_pos[a], prev_pos[k], prev_pos[b]
-    root, target = positions[idx[a]].copy(), positions[idx[b]].copy()
+    joint = centre + radius * u
     positions[idx[k]] = joint
+    # the rest of the run: its last shape, turned with the plane of (a, k, b)
     turn = shape_turn(pk - pa, pb - pk, joint - root, target - joint)
     for j in range(k + 1, b):
         positions[idx[j]] = joint + mv(turn, prev_pos[j] - pk)
@@ -291,6 +280,7 @@ def _place_run(joint, pose, idx, prev, parent_now, a, k, b):
     if not all_finite(like):
         like = mm(mm(parent_now, prev_parent.T.copy()), prev_frames[a])
     frames[idx[a]] = _frame_along(joint - root, like)
+    return b - k
 
 
 @njit(cache=True)

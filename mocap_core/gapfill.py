@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -252,27 +251,14 @@ def _rigid_chain(prev_pos, lengths, root, m):
     return P
 
 
-class LastChain(NamedTuple):
-    """The limb as last seen whole, the next frame's starting chain, and its bones' learned lengths (one tuple for
-    _fill_limb's parts, built inside the kernel)."""
-    pos: np.ndarray          # (n, 3) its joints
-    frames: np.ndarray       # (n, 3, 3) their frames
-    parent_frame: np.ndarray  # (3, 3) its parent's frame
-    has: np.ndarray          # (1,) bool: whether there is one
-    lengths: np.ndarray      # (n - 1,) learned bone lengths
-
-
 @njit(cache=True)
 def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_frames, prev_parent, has_prev,
                lengths, pp, cones, has_cone, twists, has_twist, solver, max_iterations, stop_distance_m, constraints,
                escape_step_deg, escape_max_deg, out):
     """Algorithm 1 for one limb, in place. out = [estimated, held, iterations, max residual m]."""
-    how = (solver, SolverParams(max_iterations, stop_distance_m, constraints, escape_step_deg, escape_max_deg))
-    memory = LastChain(prev_pos, prev_frames, prev_parent, has_prev, lengths)
-    pose = (positions, frames, status)
+    params = SolverParams(max_iterations, stop_distance_m, constraints, escape_step_deg, escape_max_deg)
     n = idx.shape[0]
     parent_frame = frames[parent].copy()
-    limits = ChainLimits(parent_frame, pp, cones, has_cone, twists, has_twist)
     if status[idx[0]] == MISSING and is_arm and status[parent] != MISSING:
         # the clavicle joint sits on the sternum-clavicle point, its parent's position (facts 9.1)
         positions[idx[0]] = positions[parent]
@@ -284,82 +270,64 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
             if status[idx[i]] != MISSING:
                 i += 1
                 continue
-            t = i
+            root, t = i - 1, i
             while t < n and status[idx[t]] == MISSING:
                 t += 1
-            _fill_chain(pose, idx, memory, limits, i - 1, t, how, out)
+            last = t if t < n else n - 1
+            m = last - root  # bones in the chain
+            # the previous chain from root to target (or to the limb's end), moved onto the current root, each
+            # bone at its learned length: the chain's last bone would otherwise carry each frame's residual
+            # into the next frame's start, and stretch frame after frame
+            prev = _rigid_chain(prev_pos, lengths, root, m)
+            P = np.empty((m + 1, 3))
+            for k in range(m + 1):
+                P[k] = prev[k] - prev[0] + positions[idx[root]]
+            R = prev_frames[root:last].copy()
+            ref0 = parent_frame if root == 0 else frames[idx[root - 1]].copy()
+            if not all_finite(ref0):
+                ref0 = parent_frame
+            if t < n:
+                target = positions[idx[t]].astype(np.float64)
+                run = ChainLimits(ref0, pp[root:last], cones[root:last], has_cone[root:last], twists[root:last],
+                                  has_twist[root:last])
+                it, res = solve(solver, P, R, target, run, params)
+                out[2] += it
+                out[3] = max(out[3], res)
+                first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position, if reached
+                if res > params.stop_distance_m:
+                    # out of the rigid chain's reach: the target and the joints after it hang at the chain's end,
+                    # as they are, so no bone stretches (the thesis's C# code keeps every bone's length too)
+                    shift = P[m] - target
+                    for k in range(t, n):
+                        positions[idx[k]] = positions[idx[k]] + shift
+                    status[idx[t]] = ESTIMATED
+            else:
+                # no target: keep the last rotation relative to the parent (a rigid carry)
+                turn = mm(parent_frame, prev_parent.T.copy())
+                for k in range(m + 1):
+                    P[k] = positions[idx[root]] + mv(turn, prev[k] - prev[0])
+                for k in range(m):
+                    R[k] = mm(turn, prev_frames[root + k])
+                frames[idx[last]] = mm(turn, prev_frames[last])
+                first, stop, code = 1, m + 1, HELD
+            for k in range(first, stop):
+                positions[idx[root + k]] = P[k]
+                status[idx[root + k]] = code
+                out[0 if code == ESTIMATED else 1] += 1
+            for k in range(m):
+                frames[idx[root + k]] = R[k]
             i = t + 1
-    if parent_ok:
-        _remember(pose, idx, memory, parent_frame)
-
-
-@njit(cache=True, inline="always")
-def _fill_chain(pose, idx, memory, limits, root, t, how, out):
-    """The joints after ``root`` up to ``t`` (the next seen joint; the limb's length: none) are missing: the
-    remembered chain, moved onto the current root with each bone at its learned length, solved to reach joint t
-    (``how``: the solver and its SolverParams), or without a target carried rigidly with the parent."""
-    positions, frames, status = pose
-    n = idx.shape[0]
-    last = t if t < n else n - 1
-    m = last - root  # bones in the chain
-    # the previous chain from root to target (or to the limb's end), moved onto the current root, each
-    # bone at its learned length: the chain's last bone would otherwise carry each frame's residual
-    # into the next frame's start, and stretch frame after frame
-    prev = _rigid_chain(memory.pos, memory.lengths, root, m)
-    P = np.empty((m + 1, 3))
-    for k in range(m + 1):
-        P[k] = prev[k] - prev[0] + positions[idx[root]]
-    R = memory.frames[root:last].copy()
-    parent_frame = limits.ref0
-    ref0 = parent_frame if root == 0 else frames[idx[root - 1]].copy()
-    if not all_finite(ref0):
-        ref0 = parent_frame
-    if t < n:
-        target = positions[idx[t]].astype(np.float64)
-        run = ChainLimits(ref0, limits.pp[root:last], limits.cones[root:last], limits.has_cone[root:last],
-                          limits.twists[root:last], limits.has_twist[root:last])
-        it, res = solve(how[0], P, R, target, run, how[1])
-        out[2] += it
-        out[3] = max(out[3], res)
-        first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position, if reached
-        if res > how[1].stop_distance_m:
-            # out of the rigid chain's reach: the target and the joints after it hang at the chain's end,
-            # as they are, so no bone stretches (the thesis's C# code keeps every bone's length too)
-            shift = P[m] - target
-            for k in range(t, n):
-                positions[idx[k]] = positions[idx[k]] + shift
-            status[idx[t]] = ESTIMATED
-    else:
-        # no target: keep the last rotation relative to the parent (a rigid carry)
-        turn = mm(parent_frame, memory.parent_frame.T.copy())
-        for k in range(m + 1):
-            P[k] = positions[idx[root]] + mv(turn, prev[k] - prev[0])
-        for k in range(m):
-            R[k] = mm(turn, memory.frames[root + k])
-        frames[idx[last]] = mm(turn, memory.frames[last])
-        first, stop, code = 1, m + 1, HELD
-    for k in range(first, stop):
-        positions[idx[root + k]] = P[k]
-        status[idx[root + k]] = code
-        out[0 if code == ESTIMATED else 1] += 1
-    for k in range(m):
-        frames[idx[root + k]] = R[k]
-
-
-@njit(cache=True, inline="always")
-def _remember(pose, idx, memory, parent_frame):
-    """This frame's limb as the next frame's starting chain, if it is whole."""
-    positions, frames, _ = pose
-    n = idx.shape[0]
+    # remember this frame's limb as the next frame's starting chain, if it is whole
+    whole = parent_ok
     for k in range(n):
-        if not all_finite(positions[idx[k]]):
-            return
-    for k in range(n):
-        memory.pos[k] = positions[idx[k]]
-        if all_finite(frames[idx[k]]) or not memory.has[0]:
-            memory.frames[k] = frames[idx[k]]  # an end joint without a frame keeps its previous one
-    memory.parent_frame[:] = parent_frame
-    memory.has[0] = True
+        whole = whole and all_finite(positions[idx[k]])
+    if whole:
+        for k in range(n):
+            prev_pos[k] = positions[idx[k]]
+            if all_finite(frames[idx[k]]) or not has_prev[0]:
+                prev_frames[k] = frames[idx[k]]  # an end joint without a frame keeps its previous one
+        prev_parent[:] = parent_frame
+        has_prev[0] = True
 
 
 class GapFiller:

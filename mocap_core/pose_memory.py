@@ -39,7 +39,7 @@ learns from the frames before a gap) and never learns from landmarks that were t
 """
 from __future__ import annotations
 
-from typing import Iterable, NamedTuple, Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 from numba import njit
@@ -333,21 +333,6 @@ def within_reach(point, toe, hip, reach):
     return toe + along * axis + np.sqrt(ring) * across / vnorm(across)
 
 
-class LegMemory(NamedTuple):
-    """What fill_frame keeps of the legs, as one tuple for its parts (built inside the kernel: a tuple passed
-    from Python costs its dispatch)."""
-    legs: np.ndarray         # (G, 3 + width): the toe, the heel, the number of targets, the targets
-    mirror: np.ndarray       # (G,) the other leg, -1: none
-    toe_share: np.ndarray    # (G, width) how much of the toe's motion each target follows
-    keys: np.ndarray         # the remembered poses: their keys,
-    offsets: np.ndarray      # ... their targets' offsets,
-    state: np.ndarray        # ... how many and where the next goes,
-    last_kept: np.ndarray    # ... the last pose kept
-    last_seen: np.ndarray    # (G, width, 3) each target's last seen offset
-    estimate: np.ndarray     # (G, width, 3) the targets being filled, NaN: not filling
-    reach: np.ndarray        # (G,) how far each leg has reached from its hip
-
-
 @njit(cache=True)
 def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_kept, last_seen, estimate, out,
                pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound, sound_frames, reach, toe_motion,
@@ -357,10 +342,12 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
         pelvis_motion[TRACKING, 0] = 0.0
         return
     track_pelvis(origin, rot, pelvis_axes, pelvis_motion)
-    memory = LegMemory(legs, mirror, toe_share, keys, offsets, state, last_kept, last_seen, estimate, reach)
     _, left_hip, right_hip = hip_centres(lm)
+    flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
+    flip_key = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0])
     pose_key = np.empty(6)
-    seen = np.zeros((legs.shape[1] - 2, 3))  # the targets, then the foot's line
+    width = legs.shape[1] - 3
+    seen = np.zeros((width + 1, 3))  # the targets, then the foot's line
     for g in range(legs.shape[0]):
         key, heel, nt = legs[g, 0], legs[g, 1], legs[g, 2]
         hip = left_hip if key == L_TOE else right_hip
@@ -382,71 +369,45 @@ def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_k
         if not lost or vfinite(lm[heel]):  # seen whole, or the foot is tracked (segment carry)
             estimate[g, 0, 0] = np.nan
             if not lost and measured:
-                seen[-1] = line
+                for t in range(nt):
+                    seen[t] = mtv(rot, lm[legs[g, 3 + t]] - origin)
+                    last_seen[g, t] = seen[t] - toe_share[g, t] * local_toe
+                seen[width] = line
                 if spacing == spacing:
                     foot_width[g] = follow(foot_width[g], spacing, FOOT_WIDTH_RATE)
-                _learn_leg(memory, g, lm, (origin, rot), hip, local_toe, pose_key, seen)
+                keep(keys[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], pose_key, seen)
+                for t in range(nt):
+                    if toe_share[g, t] == 1.0:  # (an ankle: how far the leg reaches, for either leg)
+                        far = vnorm(lm[legs[g, 3 + t]] - hip)
+                        reach[g] = grown_reach(reach[g], far)
+                        if mirror[g] >= 0:
+                            reach[mirror[g]] = grown_reach(reach[mirror[g]], far)
+                other = mirror[g]
+                if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
+                    keep(keys[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
+                          pose_key * flip_key, seen * flip)
             continue
-        if state[g, 0, 0] >= NEIGHBOURS:
-            mean = _recalled(memory, g, local_toe, pose_key, line)
-            _put_leg(memory, g, mean, lm, out, (origin, rot), toe, hip)
-
-
-@njit(cache=True, inline="always")
-def _learn_leg(m, g, lm, pelvis, hip, local_toe, pose_key, seen):
-    """Leg ``g``, seen whole and measured: its pose kept, under its toe's place and velocity ``pose_key``, in its
-    own memory and, mirrored, in the other leg's; the leg's reach grown. ``pelvis``: (origin, frame); ``seen``: the
-    foot's line in its last row, the targets written above it."""
-    origin, rot = pelvis
-    nt = m.legs[g, 2]
-    for t in range(nt):
-        seen[t] = mtv(rot, lm[m.legs[g, 3 + t]] - origin)
-        m.last_seen[g, t] = seen[t] - m.toe_share[g, t] * local_toe
-    keep(m.keys[g, 0], m.offsets[g, 0], m.state[g, 0], m.last_kept[g, 0], pose_key, seen)
-    other = m.mirror[g]
-    for t in range(nt):
-        if m.toe_share[g, t] == 1.0:  # (an ankle: how far the leg reaches, for either leg)
-            far = vnorm(lm[m.legs[g, 3 + t]] - hip)
-            m.reach[g] = grown_reach(m.reach[g], far)
-            if other >= 0:
-                m.reach[other] = grown_reach(m.reach[other], far)
-    if other >= 0:  # and, mirrored, as a pose the other leg may fall back on (across the pelvis frame's x)
-        keep(m.keys[other, 1], m.offsets[other, 1], m.state[other, 1], m.last_kept[other, 1],
-             pose_key * np.array([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0]), seen * np.array([-1.0, 1.0, 1.0]))
-
-
-@njit(cache=True, inline="always")
-def _recalled(m, g, local_toe, pose_key, line):
-    """Leg ``g``'s targets (nt, 3) from the poses found by the toe's place, and by its place and velocity
-    (VELOCITY_S), in the same memory: each target from both, weighted by how closely each search's poses agree."""
-    nt, width = m.legs[g, 2], m.legs.shape[1] - 3
-    mean, place_spread, source = recall(m.keys[g], m.offsets[g], m.state[g], local_toe, -1 if m.mirror[g] >= 0 else 0,
-                                        line, m.toe_share[g], nt, width)
-    by_motion, motion_spread, _ = recall(m.keys[g], m.offsets[g], m.state[g], pose_key, source, line, m.toe_share[g],
-                                         nt, width)
-    for t in range(nt):
-        w = place_spread[t] / (place_spread[t] + motion_spread[t])
-        mean[t] = w * by_motion[t] + (1.0 - w) * mean[t]
-    return mean
-
-
-@njit(cache=True, inline="always")
-def _put_leg(m, g, mean, lm, out, pelvis, toe, hip):
-    """Leg ``g``'s lost targets put where its estimate has eased toward ``mean``; at a gap's start the estimate
-    starts from the last pose seen, so nothing jumps. ``pelvis``: (origin, frame)."""
-    origin, rot = pelvis
-    nt, estimate = m.legs[g, 2], m.estimate
-    local_toe = mtv(rot, toe - origin)
-    if np.isnan(estimate[g, 0, 0]):
-        if np.isnan(m.last_seen[g, 0, 0]):
-            estimate[g, :nt] = mean
-        else:
-            estimate[g, :nt] = m.last_seen[g, :nt]
-    estimate[g, :nt] += SMOOTHING * (mean - estimate[g, :nt])
-    for t in range(nt):
-        k = m.legs[g, 3 + t]
-        if not vfinite(lm[k]):
-            lm[k] = origin + mv(rot, estimate[g, t] + m.toe_share[g, t] * local_toe)
-            if m.toe_share[g, t] == 1.0 and m.reach[g] > 0.0:
-                lm[k] = within_reach(lm[k], toe, hip, m.reach[g])
-            out[k] = True
+        if state[g, 0, 0] < NEIGHBOURS:
+            continue
+        # the poses found by the toe's place, and by its place and velocity (VELOCITY_S), in the same memory: each
+        # target from both, weighted by how closely each search's poses agree
+        mean, place_spread, source = recall(keys[g], offsets[g], state[g], local_toe, -1 if mirror[g] >= 0 else 0,
+                                            line, toe_share[g], nt, width)
+        by_motion, motion_spread, _ = recall(keys[g], offsets[g], state[g], pose_key, source, line, toe_share[g],
+                                             nt, width)
+        for t in range(nt):
+            w = place_spread[t] / (place_spread[t] + motion_spread[t])
+            mean[t] = w * by_motion[t] + (1.0 - w) * mean[t]
+        if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps
+            if np.isnan(last_seen[g, 0, 0]):
+                estimate[g, :nt] = mean
+            else:
+                estimate[g, :nt] = last_seen[g, :nt]
+        estimate[g, :nt] += SMOOTHING * (mean - estimate[g, :nt])
+        for t in range(nt):
+            k = legs[g, 3 + t]
+            if not vfinite(lm[k]):
+                lm[k] = origin + mv(rot, estimate[g, t] + toe_share[g, t] * local_toe)
+                if toe_share[g, t] == 1.0 and reach[g] > 0.0:
+                    lm[k] = within_reach(lm[k], toe, hip, reach[g])
+                out[k] = True

@@ -33,7 +33,7 @@ carry gives 4 mm) and the hand with the forearm (a wrist flexes).
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+from typing import Sequence
 
 import numpy as np
 from numba import njit
@@ -258,166 +258,113 @@ class SegmentRebuilder:
         return out, mask
 
 
-class Segment(NamedTuple):
-    """One segment's row of the table and its memory, as rebuild_frame's parts take it (views, built inside the
-    kernel: a tuple passed from Python costs its dispatch)."""
-    seg: np.ndarray            # (K,) its points' rows in the frame, -1 past ``width``
-    width: int                 # its points
-    rigid: int                 # its members that move as one (the rest: the bone above's tracking markers)
-    rebuilt: int               # its members that may be rebuilt
-    refined: int               # its members rebuilt with their distances kept
-    held_from: int             # the first tracking marker their distances hold to, -1: every point
-    shaft_rolls: int           # 1: its members roll with the bone above's tracking markers
-    pair: np.ndarray           # (2,) its bony pair (-1: none)
-    lone: int                  # >0: a lone styloid, rebuilt from the other one and this many partners
-    reference: np.ndarray      # (K, K, 3) each member's reference: the segment as last seen with it
-    distance: np.ndarray       # (K, K) learned distances between its points
-    last: np.ndarray           # (K, 3) each member's last position
-    slid: np.ndarray           # (K,) the pair member found slid, per member
-    along: np.ndarray          # (K,) the pair member sliding with its spacing kept, and since when:
-    along_since: np.ndarray    # (K,)
-
-
-class Work(NamedTuple):
-    """rebuild_frame's work arrays, allocated once a frame."""
-    seen: np.ndarray       # (K,) each point of the segment seen
-    before: np.ndarray     # (K, 3) a member's partners in its reference,
-    after: np.ndarray      # ... and now
-    weights: np.ndarray    # (K,) their weights
-    on_shaft: np.ndarray   # (K,) which of them are tracking markers
-    previous: np.ndarray   # (K, 3) each member in the frame before
-    point: np.ndarray      # (1, 3) and (K, 3): best_roll's
-    above: np.ndarray
-
-
 @njit(cache=True)
 def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, lone,
                   reference, distance, last, slid, along, along_since, time_s, rebuilt):
-    K = segments.shape[1]
-    work = Work(np.zeros(K, np.bool_), np.empty((K, 3)), np.empty((K, 3)), np.empty(K), np.zeros(K, np.bool_),
-                np.empty((K, 3)), np.empty((1, 3)), np.empty((K, 3)))
+    seen = np.zeros(segments.shape[1], np.bool_)
+    before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
+    weights = np.empty(segments.shape[1])
+    on_shaft = np.zeros(segments.shape[1], np.bool_)  # which gathered partners are tracking markers
+    point, above = np.empty((1, 3)), np.empty((segments.shape[1], 3))
+    previous = np.empty((segments.shape[1], 3))  # each member in the frame before
     for s in range(segments.shape[0]):
-        width = np.int64(0)  # int64 from the start: a literal would compile each kernel it reaches twice
-        while width < K and segments[s, width] >= 0:
+        seg, rigid = segments[s], rigid_count[s]
+        width, count = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
+        for k in range(seg.shape[0]):
+            if seg[k] < 0:
+                break
             width += 1
-        sg = Segment(segments[s], width, rigid_count[s], rebuilt_count[s], refined_count[s], held_from[s],
-                     shaft_rolls[s], pairs[s], lone[s], reference[s], distance[s], last[s], slid[s], along[s],
-                     along_since[s])
-        count = _look(lm, sg, work, rebuilt)
-        if count == sg.rigid or count < MIN_SHAFT_PARTNERS:
+            seen[k] = vfinite(lm[seg[k]])
+            if seen[k] and k < rigid:
+                count += 1
+            if k < rebuilt_count[s]:
+                previous[k] = last[s, k]
+                last[s, k] = lm[seg[k]]  # (NaN when lost; a rebuilt one is written below)
+        _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
+        # Each seen member's reference: the segment as it is now, unless that has fewer partners than
+        # the one kept, which then stays (a heel lost a frame before its ankle would leave a reference of the
+        # metatarsals alone, all on one line, from which the ankle cannot be rebuilt).
+        if count > MIN_SHAFT_PARTNERS:
+            for k in range(rigid):
+                if seen[k] and count - 1 >= _partners(reference[s, k], k, rigid):
+                    slid[s, k], along[s, k] = -1, -1
+                    for m in range(rigid):
+                        if seen[m]:
+                            reference[s, k, m] = lm[seg[m]]
+                        else:
+                            reference[s, k, m] = np.nan
+        if count == rigid or count < MIN_SHAFT_PARTNERS:
             continue
-        for k in range(sg.rebuilt):
-            _rebuild_member(lm, sg, k, work, time_s, rebuilt)
-
-
-@njit(cache=True, inline="always")
-def _look(lm, sg, work, rebuilt):
-    """Which of the segment's points are seen (``work.seen``), each member's last position kept (``work.previous``
-    the one before), the distances learned, and each seen member's reference renewed: the segment as it is now,
-    unless that has fewer partners than the one kept, which then stays (a heel lost a frame before its ankle would
-    leave a reference of the metatarsals alone, all on one line, from which the ankle cannot be rebuilt). Returns
-    how many of its rigid members are seen."""
-    seen, seg = work.seen, sg.seg
-    count = 0
-    for k in range(sg.width):
-        seen[k] = vfinite(lm[seg[k]])
-        if seen[k] and k < sg.rigid:
-            count += 1
-        if k < sg.rebuilt:
-            work.previous[k] = sg.last[k]
-            sg.last[k] = lm[seg[k]]  # (NaN when lost; a rebuilt one is written below)
-    _learn_distances(lm, seg, sg.width, sg.refined, seen, rebuilt, sg.distance)
-    if count > MIN_SHAFT_PARTNERS:
-        for k in range(sg.rigid):
-            if seen[k] and count - 1 >= _partners(sg.reference[k], k, sg.rigid):
-                sg.slid[k], sg.along[k] = -1, -1
-                for m in range(sg.rigid):
-                    if seen[m]:
-                        sg.reference[k, m] = lm[seg[m]]
-                    else:
-                        sg.reference[k, m] = np.nan
-    return count
-
-
-@njit(cache=True, inline="always")
-def _rebuild_member(lm, sg, k, work, time_s, rebuilt):
-    """Member k, lost, carried from its reference by its seen partners (and rolled or held at its distances)."""
-    seen, seg = work.seen, sg.seg
-    if seen[k] or rebuilt[seg[k]] or not vfinite(sg.reference[k, k]):
-        return
-    if sg.lone and not (seen[1 - k] and not rebuilt[seg[1 - k]]):  # (a lone styloid: the other one seen)
-        return
-    sg.slid[k] = _slid(lm, sg, seen, k, time_s)
-    n, shaft = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
-    for m in range(sg.rigid):
-        if m != sg.slid[k] and seen[m] and vfinite(sg.reference[k, m]):
-            work.before[n], work.after[n] = sg.reference[k, m], lm[seg[m]]
-            work.weights[n] = nearness_weight(vnorm(sg.reference[k, m] - sg.reference[k, k]))
-            work.on_shaft[n] = seg[m] >= N_LANDMARKS
-            if work.on_shaft[n]:
-                shaft += 1
-            n += 1
-    if sg.lone and n - 1 < sg.lone:
-        return
-    ok, p = _carried(lm, sg, k, work, n, shaft)
-    if ok:
-        lm[seg[k]] = p
-        sg.last[k] = p
-        rebuilt[seg[k]] = True
-
-
-@njit(cache=True, inline="always")
-def _carried(lm, sg, k, work, n, shaft):
-    """(whether it can be, member k carried by its n gathered partners (``shaft`` of them tracking markers)):
-    by their rigid fit, or by the line of two (rolled: then turned about that line by the bone above;
-    forearm_roll: from the member's side of the line in the frame before, see ROLLS_ABOUT_SHAFT); a refined
-    member then keeps its distances, or rolls as firmly as the bone above's markers tell (ROLL_FIRM_FROM)."""
-    seen, before, after = work.seen, work.before, work.after
-    rolled, forearm_roll, fitted_roll, i, j = False, False, False, 0, 1
-    refined = k < sg.refined and _above_seen(sg.rigid, sg.width, seen, sg.distance[k])
-    if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
-        rot, t = rigid_fit_weighted(before, after, work.weights, n)
-        fitted_roll = sg.shaft_rolls == 1 and 0 < shaft < n and refined
-    elif n == MIN_SHAFT_PARTNERS and shaft == 1:
-        rot, t = line_carry(before[0], before[1], after[0], after[1])
-        forearm_roll = sg.shaft_rolls == 1 and refined
-        rolled = forearm_roll
-    elif n >= 2 and refined:
-        i, j = _farthest(before, n)
-        rot, t = line_carry(before[i], before[j], after[i], after[j])
-        rolled = True
-    else:
-        return False, np.empty(3)
-    p = mv(rot, sg.reference[k, k]) + t
-    if forearm_roll and vfinite(work.previous[k]):
-        p = _turned_toward(p, after[i], after[j], work.previous[k])
-    if rolled:
-        return True, _roll_by_above(p, after[i], after[j], lm, sg, k, work)
-    if k < sg.refined:
-        firm, rolled_p = 0.0, p
-        if fitted_roll:  # (ROLL_FIRM_FROM)
-            pivot, toward = _shaft_line(after, work.on_shaft, n)
-            firm = _roll_firmness(p, pivot, toward, lm, sg, k, seen)
-            if firm > 0.0:
-                rolled_p = _roll_by_above(p, pivot, toward, lm, sg, k, work)
-        kept = rolled_p
-        if firm < 1.0:
-            kept = _keep_distances(p, lm, sg, k, seen, DISTANCE_PRIOR, EVERY_POINT)
-            kept = _keep_distances(kept, lm, sg, k, seen, TRACKING_PRIOR, sg.held_from)
-        p = firm * rolled_p + (1.0 - firm) * kept
-    return True, p
+        for k in range(rebuilt_count[s]):
+            if seen[k] or rebuilt[seg[k]] or not vfinite(reference[s, k, k]):
+                continue
+            if lone[s] and not (seen[1 - k] and not rebuilt[seg[1 - k]]):  # (a lone styloid: the other one seen)
+                continue
+            slid[s, k] = _slid(lm, seg, rigid, seen, reference[s, k], pairs[s, 0], pairs[s, 1], slid[s, k], along[s],
+                               along_since[s], k, time_s)
+            n, shaft = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
+            for m in range(rigid):
+                if m != slid[s, k] and seen[m] and vfinite(reference[s, k, m]):
+                    before[n], after[n] = reference[s, k, m], lm[seg[m]]
+                    weights[n] = nearness_weight(vnorm(reference[s, k, m] - reference[s, k, k]))
+                    on_shaft[n] = seg[m] >= N_LANDMARKS
+                    if on_shaft[n]:
+                        shaft += 1
+                    n += 1
+            # (rolled: carried by partners i and j's line, then about it by the bone above; forearm_roll: from the
+            # member's side of that line in the frame before, see ROLLS_ABOUT_SHAFT)
+            if lone[s] and n - 1 < lone[s]:
+                continue
+            rolled, forearm_roll, fitted_roll, i, j = False, False, False, 0, 1
+            if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
+                rot, t = rigid_fit_weighted(before, after, weights, n)
+                fitted_roll = (shaft_rolls[s] == 1 and k < refined_count[s] and 0 < shaft < n
+                               and _above_seen(rigid, width, seen, distance[s, k]))
+            elif n == MIN_SHAFT_PARTNERS and shaft == 1:
+                rot, t = line_carry(before[0], before[1], after[0], after[1])
+                forearm_roll = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen,
+                                                                                              distance[s, k])
+                rolled = forearm_roll
+            elif n >= 2 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k]):
+                i, j = _farthest(before, n)
+                rot, t = line_carry(before[i], before[j], after[i], after[j])
+                rolled = True
+            else:
+                continue
+            p = mv(rot, reference[s, k, k]) + t
+            if forearm_roll and vfinite(previous[k]):
+                p = _turned_toward(p, after[i], after[j], previous[k])
+            if rolled:
+                p = _roll_by_above(p, after[i], after[j], lm, seg, rigid, width, seen, distance[s, k], point, above)
+            elif k < refined_count[s]:
+                firm, rolled_p = 0.0, p
+                if fitted_roll:  # (ROLL_FIRM_FROM)
+                    pivot, toward = _shaft_line(after, on_shaft, n)
+                    firm = _roll_firmness(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k])
+                    if firm > 0.0:
+                        rolled_p = _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k],
+                                                  point, above)
+                kept = rolled_p
+                if firm < 1.0:
+                    kept = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, EVERY_POINT)
+                    kept = _keep_distances(kept, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR,
+                                           held_from[s])
+                p = firm * rolled_p + (1.0 - firm) * kept
+            lm[seg[k]] = p
+            last[s, k] = p
+            rebuilt[seg[k]] = True
 
 
 @njit(cache=True)
-def _slid(lm, sg, seen, k, time_s):
-    """Which of the segment's bony pair (-1: none) has slid since member ``k``'s reference (BONY_PAIRS): -1 while
-    their spacing holds, unless one has slid along with it kept for SLID_ALONG_S (``sg.along``, ``sg.along_since``);
-    the last verdict where it cannot be told."""
-    i, j, reference, rigid, seg = sg.pair[0], sg.pair[1], sg.reference[k], sg.rigid, sg.seg
+def _slid(lm, seg, rigid, seen, reference, i, j, before, along, along_since, k, time_s):
+    """Which of the bony pair at positions i, j (-1: none) has slid since ``reference``, the member's (BONY_PAIRS):
+    -1 while their spacing holds, unless one has slid along with it kept for SLID_ALONG_S (``along``,
+    ``along_since``: the segment's, kept here; ``k``: the member); ``before`` (the last verdict) where it cannot
+    be told."""
     if i < 0 or not (vfinite(reference[i]) and vfinite(reference[j])):
         return -1
     if not (seen[i] and seen[j]):
-        return sg.slid[k]
+        return before
     moved_i, moved_j, others = 0.0, 0.0, 0
     for m in range(rigid):
         if m != i and m != j and seen[m] and vfinite(reference[m]):
@@ -427,13 +374,12 @@ def _slid(lm, sg, seen, k, time_s):
     sliding = -1
     if others and max(moved_i, moved_j) > max(SLID_ALONG_M, SLID_ALONG_RATIO * min(moved_i, moved_j)):
         sliding = i if moved_i > moved_j else j
-    along, along_since = sg.along, sg.along_since
     if sliding != along[k] or time_s < along_since[k]:  # (a stream restarted, its clock with it: start over)
         along[k], along_since[k] = sliding, time_s
     if _stretch(lm, seg, reference, i, j) <= SLID_M:
         return sliding if sliding >= 0 and time_s - along_since[k] >= SLID_ALONG_S else -1
     if others == 0:
-        return sg.slid[k]
+        return before
     return i if moved_i > moved_j else j
 
 
@@ -451,17 +397,16 @@ def _turned_toward(p, pivot, toward, target):
 
 
 @njit(cache=True)
-def _roll_by_above(p, pivot, toward, lm, sg, k, work):
-    """``p`` (member k) turned about the line from ``pivot`` toward ``toward`` to keep its learned distances to the
-    bone above's seen tracking markers best."""
+def _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance, point, above):
+    """``p`` turned about the line from ``pivot`` toward ``toward`` to keep its learned distances to the bone
+    above's seen tracking markers best (``point`` and ``above``: work arrays)."""
     line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
-    rigid, width, point, above = sg.rigid, sg.width, work.point, work.above
     point[0] = p
     for m in range(rigid, width):
         above[m - rigid] = np.nan
-        if work.seen[m]:
-            above[m - rigid] = lm[sg.seg[m]]
-    angle = best_roll(pivot, line, point, above[:width - rigid], sg.distance[k, rigid:width].reshape(1, width - rigid),
+        if seen[m]:
+            above[m - rigid] = lm[seg[m]]
+    angle = best_roll(pivot, line, point, above[:width - rigid], distance[rigid:width].reshape(1, width - rigid),
                       ROLL_PRICE, MAX_ROLL, ROLL_STEP)
     return pivot + mv(axis_angle(line, angle), p - pivot)
 
@@ -479,16 +424,16 @@ def _shaft_line(partners, on_shaft, n):
 
 
 @njit(cache=True)
-def _roll_firmness(p, pivot, toward, lm, sg, k, seen):
-    """How far to trust a roll of ``p`` (member k) about the line from ``pivot`` toward ``toward`` by the bone
-    above's tracking markers (0-1): by how fast its distance to them changes with the roll, metres per radian, at
-    best (ROLL_FIRM_FROM, ROLL_FIRM_FULL)."""
+def _roll_firmness(p, pivot, toward, lm, seg, rigid, width, seen, distance):
+    """How far to trust a roll of ``p`` about the line from ``pivot`` toward ``toward`` by the bone above's
+    tracking markers (0-1): by how fast its distance to them changes with the roll, metres per radian, at best
+    (ROLL_FIRM_FROM, ROLL_FIRM_FULL)."""
     line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
     across = np.cross(line, p - pivot)  # p's velocity per radian of roll
     rate = 0.0
-    for m in range(sg.rigid, sg.width):
-        if seen[m] and not np.isnan(sg.distance[k, m]):
-            u = p - lm[sg.seg[m]]
+    for m in range(rigid, width):
+        if seen[m] and not np.isnan(distance[m]):
+            u = p - lm[seg[m]]
             rate = max(rate, abs((across * u).sum()) / max(vnorm(u), 1e-9))
     return min(1.0, max(0.0, (rate - ROLL_FIRM_FROM) / (ROLL_FIRM_FULL - ROLL_FIRM_FROM)))
 
@@ -551,18 +496,17 @@ def _learn_distances(lm, seg, width, refined, seen, rebuilt, distance):
 
 
 @njit(cache=True)
-def _keep_distances(p, lm, sg, k, seen, prior, held_from):
-    """Gauss-Newton: the point nearest the estimate ``p`` of member k (weight ``prior``) that keeps its learned
+def _keep_distances(p, lm, seg, rigid, width, seen, distance, prior, held_from):
+    """Gauss-Newton: the point nearest the estimate ``p`` (weight ``prior``) that keeps its learned
     distances to the seen points (``held_from`` >= 0: to the tracking markers from that point on);
     unchanged unless a distance-only point is seen."""
-    distance, seg = sg.distance[k], sg.seg
-    if not _above_seen(sg.rigid, sg.width, seen, distance):
+    if not _above_seen(rigid, width, seen, distance):
         return p
     q = p.copy()
     for _ in range(10):
         a = prior * np.eye(3)
         g = prior * (q - p)
-        for m in range(sg.width):
+        for m in range(width):
             if not seen[m] or np.isnan(distance[m]) or (held_from >= 0 and (m < held_from or seg[m] < N_LANDMARKS)):
                 continue
             v = q - lm[seg[m]]
