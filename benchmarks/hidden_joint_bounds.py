@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from mocap_cli.rigid_eval import TAKES, load_take, take_names  # noqa: E402
+from mocap_cli.rigid_eval import TAKES, load_take  # noqa: E402
 from mocap_core.fit.compare import cases  # noqa: E402
 from mocap_core.fit.take import fit_take  # noqa: E402
 from mocap_core.skeleton import INDEX, PARENT_INDEX  # noqa: E402
@@ -99,11 +99,16 @@ def report(errors: np.ndarray, start: int) -> str:
 
 
 def main() -> int:
+    np.seterr(invalid="ignore", divide="ignore")  # frames where a marker is lost: NaN, left out of the figures
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--takes", default=",".join(TAKES))
+    ap.add_argument("--takes", default=",".join(TAKES), help=f"comma-separated, of: {', '.join(TAKES)}")
     args = ap.parse_args()
     print("mean / max mm after 1 s; targets: worst case 60 / 150, elbow 15 / 50, knee + ankle mean 20")
-    for name in take_names("bounds", args.takes):
+    names = [t.strip() for t in args.takes.split(",") if t.strip()]
+    unknown = [t for t in names if t not in TAKES]
+    if unknown:
+        raise SystemExit(f"hidden_joint_bounds: unknown take {unknown[0]!r} (takes: {', '.join(TAKES)})")
+    for name in names:
         rec, profile = load_take(name, 20.0)
         markers = rec.positions.astype(np.float64)
         chunk, _, subject = fit_take(markers, rec.labels, profile, rec.rate_hz)
