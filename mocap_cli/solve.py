@@ -83,7 +83,7 @@ def solve_take(args) -> dict:
     (out.csv -> out.actor1.csv, out.actor2.csv)."""
     rec = read_recording(args.file)
     ensure_compiled(log, FIT_PARTS if args.fit or args.subject else
-                    pipeline_parts("thesis" if args.thesis else "studio", args.solver, fill_gaps=not args.no_ik))
+                    pipeline_parts("thesis" if args.thesis else "studio", fill_gaps=not args.no_ik))
     several = actors(rec.labels)
     if len(several) < 2:
         return _solve(args, rec)

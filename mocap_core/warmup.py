@@ -26,13 +26,15 @@ PACKAGE = Path(__file__).resolve().parent
 # Which parts of this checkout's kernels are compiled (next to numba's own cache files): the sources'
 # fingerprint on the first line, a part a line after it.
 STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "numba-kernels.stamp"))
-# Every solver is a part (a test checks). The longest to compile come first, so that spread over the
-# cores the last one to finish starts early.
-PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "ccd", "fabrik", "jacobian_transpose",
-         "dls", "pair_guard", "rotations")
+# The fingerprint of the sources that numba's cache files were compiled from. numba checks a cached kernel against
+# its own file only: one that calls a kernel of another file keeps the copy it was compiled with, and loaded beside
+# that kernel's newer cache it can crash ("'descr' is NULL"). So a change of any kernel source drops them all.
+CACHED_SOURCES = PACKAGE / "__pycache__" / "numba-sources"
+# The longest to compile come first, so that spread over the cores the last one to finish starts early.
+PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "solvers", "pair_guard", "rotations")
 # One limb-fill kernel serves every solver and option (the solver and the fills are its arguments): these
 # parts compile it once, in one process, or two processes would compile the same kernel at the same time.
-FILL_PARTS = ("beyond", "ccd", "fabrik", "jacobian_transpose", "dls")
+FILL_PARTS = ("beyond", "solvers")
 FIT_PARTS = ("fit", "localization", "rotations")  # the fit localizes the frames that calibrate it
 
 
@@ -51,22 +53,22 @@ def hip_parts(options) -> tuple[str, ...]:
     return tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(options, part))
 
 
-def fill_parts(options, solver: str) -> tuple[str, ...]:
-    """The IK stage's, with these options (FillOptions, or params that derive from it) and solver: the fill kernel
-    runs less of itself with the thesis's options than with any other."""
+def fill_parts(options) -> tuple[str, ...]:
+    """The IK stage's, with these options (FillOptions, or params that derive from it): the fill kernel runs less
+    of itself with the thesis's options (a solver alone) than with any other."""
     from mocap_core.fill_options import FillOptions
 
     fills = FillOptions.of(options)
     if fills == FillOptions():
-        return (solver,)
+        return ("solvers",)
     return ("beyond", "blend") if fills.reacquire_step_m > 0 or fills.blend_half_life_s > 0 else ("beyond",)
 
 
-def pipeline_parts(preset: str, solver: str, fill_gaps: bool = True) -> tuple[str, ...]:
+def pipeline_parts(preset: str, fill_gaps: bool = True) -> tuple[str, ...]:
     """What mocap_core.pipeline.SkeletonPipeline runs with these arguments."""
     from mocap_core.presets import PRESETS
 
-    fills = hip_parts(PRESETS[preset].hips) + fill_parts(PRESETS[preset].ik, solver) if fill_gaps else ()
+    fills = hip_parts(PRESETS[preset].hips) + fill_parts(PRESETS[preset].ik) if fill_gaps else ()
     return ("localization", "rotations") + fills
 
 
@@ -83,16 +85,12 @@ def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
 
 def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
-    pair guard, the fit, the rotation conversions of the messages, the blend at a gap's ends, or one solve on a
-    chain with a missing middle joint (a solver by name; "beyond": CCD with the analytic fills of the studio
-    options)."""
-    warm = {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
-            "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations,
-            "blend": _warm_blend}.get(part)
-    if warm is not None:
-        warm()
-    else:
-        _warm_solver(part)
+    pair guard, the fit, the rotation conversions of the messages, the blend at a gap's ends, a solve on a chain
+    with a missing middle joint by every solver ("solvers"), or by CCD with the analytic fills of the studio
+    options ("beyond")."""
+    {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
+     "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations,
+     "blend": _warm_blend, "solvers": _warm_solvers, "beyond": _warm_beyond}[part]()
 
 
 def _warm_rebuild() -> None:
@@ -175,15 +173,26 @@ def _warm_blend() -> None:
     blend.blend(pos, status, idx, frames)
 
 
-def _warm_solver(part: str) -> None:
+def _warm_solvers() -> None:
+    from mocap_core.fill_options import FillOptions
+    from mocap_core.ik.solvers import SOLVERS
+
+    for solver in SOLVERS:
+        _warm_limb(solver, FillOptions())
+
+
+def _warm_beyond() -> None:
+    from mocap_core.fill_options import STUDIO
+
+    # the studio's fills; their blend is a part of its own, compiled beside them
+    _warm_limb("ccd", STUDIO.model_copy(update={"reacquire_step_m": 0.0, "blend_half_life_s": 0.0}))
+
+
+def _warm_limb(solver: str, options) -> None:
     from mocap_core.body_model import MIN_SAMPLES
-    from mocap_core.fill_options import STUDIO, FillOptions
     from mocap_core.gapfill import LimbFiller
     from mocap_core.skeleton import N_JOINTS, Status
 
-    # ("beyond": the studio's fills; their blend is a part of its own, compiled beside them)
-    solver, options = ("ccd", STUDIO.model_copy(update={"reacquire_step_m": 0.0, "blend_half_life_s": 0.0})) \
-        if part == "beyond" else (part, FillOptions())
     filler = LimbFiller("left_leg", solver, options=options)
     pos = np.zeros((N_JOINTS, 3))
     frames = np.tile(np.eye(3), (N_JOINTS, 1, 1))
@@ -241,6 +250,7 @@ def compile_kernels(parts: tuple[str, ...] = PARTS, workers: int | None = None) 
     which the final pass (one process, loading) puts back.
     """
     started = time.monotonic()
+    _drop_stale_caches(fingerprint())
     fill = tuple(p for p in PARTS if p in parts and p in FILL_PARTS)
     tasks = [fill] if fill else []
     tasks += [(p,) for p in PARTS if p in parts and p not in FILL_PARTS]
@@ -265,6 +275,22 @@ def compile_kernels(parts: tuple[str, ...] = PARTS, workers: int | None = None) 
     subprocess.run([sys.executable, "-c", f"from mocap_core.warmup import warm_up; warm_up({tuple(parts)!r})"],
                    check=True)
     return time.monotonic() - started
+
+
+def _drop_stale_caches(sources: str) -> None:
+    """Delete numba's cache files when they were compiled from other kernel sources than these (CACHED_SOURCES)."""
+    try:
+        if CACHED_SOURCES.read_text() == sources:
+            return
+    except OSError:
+        pass
+    try:
+        for path in PACKAGE.rglob("*.nb[ic]"):
+            path.unlink(missing_ok=True)
+        CACHED_SOURCES.parent.mkdir(parents=True, exist_ok=True)
+        CACHED_SOURCES.write_text(sources)
+    except OSError:
+        pass  # a read-only checkout: numba cannot write its cache there either
 
 
 def _hand_out(worker: subprocess.Popen, tasks: list[tuple[str, ...]]) -> None:

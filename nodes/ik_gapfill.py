@@ -59,7 +59,7 @@ class IkGapfill(Node):
 
     @classmethod
     def kernels(cls, params):
-        return fill_parts(params, params.solver) + ("rotations",)
+        return fill_parts(params) + ("rotations",)
 
     def setup(self) -> None:
         p = self.params

@@ -398,6 +398,30 @@ def escape_rotation(P, R, ref0, attempt, step_deg, max_deg):
 
 # -- quaternion conversions for the wire (x, y, z, w), per joint ---------------------------------------------
 @njit(cache=True)
+def jacobian(P, n):
+    """Positional Jacobian of the end effector for rotations about world x, y, z at every joint."""
+    J = np.zeros((3, 3 * n))
+    end = P[n]
+    for i in range(n):
+        r = end - P[i]
+        for a in range(3):
+            axis = np.zeros(3)
+            axis[a] = 1.0
+            J[:, 3 * i + a] = vcross(axis, r)
+    return J
+
+
+@njit(cache=True)
+def apply_angles(P, R, dtheta):
+    n = R.shape[0]
+    for i in range(n):
+        w = dtheta[3 * i: 3 * i + 3]
+        angle = vnorm(w)
+        if angle > 1e-12:
+            rotate_subchain(P, R, i, axis_angle(w / angle, angle))
+
+
+@njit(cache=True)
 def frames_to_quats(frames):
     """(J, 3, 3) rotation matrices -> (J, 4) unit quaternions (x, y, z, w), w >= 0; NaN stays NaN."""
     out = np.empty((frames.shape[0], 4))

@@ -1,4 +1,5 @@
-"""One solver interface, four solvers, picked by name (STYLE: adding a solver touches one file).
+"""One solver interface, the solvers picked by name (adding one: its module in mocap_core/ik and its line in
+solvers_kernels.SOLVERS).
 
 A solver moves a chain (positions ``P`` (n+1, 3) with a fixed root, bone frames ``R`` (n, 3, 3))
 so that its end effector reaches ``target``, honouring the chain's limits when asked.
@@ -53,7 +54,7 @@ class Solver(Protocol):
 
 @dataclass(frozen=True)
 class KernelSolver:
-    """A solver implemented by one of the numba kernels in solvers_kernels."""
+    """A solver by its place in solvers_kernels.SOLVERS, run by the shared driver (solvers_kernels.solve)."""
 
     name: str
     kernel_id: int
@@ -63,12 +64,7 @@ class KernelSolver:
         return SolveResult(int(it), float(res))
 
 
-SOLVERS: dict[str, Solver] = {
-    "ccd": KernelSolver("ccd", k.CCD),
-    "fabrik": KernelSolver("fabrik", k.FABRIK),
-    "jacobian_transpose": KernelSolver("jacobian_transpose", k.JACOBIAN_TRANSPOSE),
-    "dls": KernelSolver("dls", k.DLS),
-}
+SOLVERS: dict[str, Solver] = {name: KernelSolver(name, i) for i, name in enumerate(k.NAMES)}
 
 
 class UnknownSolver(Exception):

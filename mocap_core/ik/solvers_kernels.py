@@ -1,20 +1,29 @@
-"""The four IK solvers (thesis 3.5) as numba kernels sharing one driver loop.
+"""The IK solvers (thesis 3.5: a module each, registered below) and the driver loop they share.
 
-Each solver's ``*_step`` runs one iteration on a chain in place. :func:`solve` runs the loop that
-all four share: stop within ``stop_m`` of the target, the iteration cap, constraints after every
-step (when on), and the deadlock escape when the end effector stops getting closer.
+Each solver's ``step`` runs one iteration on a chain in place. :func:`solve` runs the loop that all share: stop
+within ``stop_m`` of the target, the iteration cap, constraints after every step (when on), and the deadlock escape
+when the end effector stops getting closer.
 """
 from __future__ import annotations
 
+import warnings
 
 import numpy as np
-from numba import njit
+from numba import literal_unroll, njit
+from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from mocap_core.ik.kernels import (EPS, axis_angle, constrain_bone, constrain_chain, escape_rotation,
-                                   rotate_subchain, rotation_between, vcross, vnorm)
+from mocap_core.ik import ccd, dls, fabrik, jacobian_transpose
+from mocap_core.ik.kernels import constrain_chain, escape_rotation, rotate_subchain, rotation_between, vnorm
 
-CCD, FABRIK, JACOBIAN_TRANSPOSE, DLS = 0, 1, 2, 3
-DLS_LAMBDA = 1.1  # thesis 3.5.1
+# The solvers, by module: each has its step(P, R, target, limits, constrained), one iteration on a chain in place.
+# Adding one is its module and its line here (here, not elsewhere: numba's cache of this file's kernels only
+# knows this file).
+SOLVERS = (ccd, fabrik, jacobian_transpose, dls)
+NAMES = tuple(m.__name__.rsplit(".", 1)[1] for m in SOLVERS)
+STEPS = tuple(m.step for m in SOLVERS)
+CCD = NAMES.index("ccd")  # what a stalled, limited solve finishes with (see solve)
+# numba types the steps as first-class functions to unroll over them, and says that feature is new
+warnings.filterwarnings("ignore", "First-class function type", NumbaExperimentalFeatureWarning)
 # An iteration that brings the end effector less than 1% closer than the best since the last escape
 # counts as a stall: STALL_ITERATIONS in a row
 # trigger the deadlock escape (crawling along a joint limit costs time and gains nothing visible).
@@ -26,109 +35,13 @@ ESCAPE_GAIN = 0.1
 
 
 @njit(cache=True)
-def ccd_step(P, R, target, limits, constrained):
-    """Cyclic coordinate descent (thesis 3.5.2): from the last bone to the first, turn each bone so
-    the end effector points at the target, then enforce that bone's limits."""
-    n = R.shape[0]
-    for i in range(n - 1, -1, -1):
-        rotate_subchain(P, R, i, rotation_between(P[n] - P[i], target - P[i]))
-        if constrained:
-            constrain_bone(P, R, i, limits)
-
-
-@njit(cache=True)
-def fabrik_step(P, R, target, limits, constrained):
-    """FABRIK (thesis 3.5.3, Aristidou and Lasenby 2011): a forward pass from the target, then a
-    backward pass from the root in which each bone is re-aimed, its frame carried by the shortest
-    arc, and its cone and twist limits enforced."""
-    n = R.shape[0]
-    lengths = np.empty(n)
-    for i in range(n):
-        lengths[i] = vnorm(P[i + 1] - P[i])
-    root = P[0].copy()
-    Q = P.copy()
-    Q[n] = target
-    for i in range(n - 1, -1, -1):
-        d = Q[i] - Q[i + 1]
-        nd = vnorm(d)
-        if nd < 1e-9:  # coincident joints: push apart along the old bone (facts: 0.001 m)
-            d = P[i] - P[i + 1]
-            nd = vnorm(d)
-        Q[i] = Q[i + 1] + d * (lengths[i] / nd)
-    Q[0] = root
-    for i in range(n):
-        d = Q[i + 1] - P[i]
-        nd = vnorm(d)
-        if nd < 1e-9:
-            continue
-        rotate_subchain(P, R, i, rotation_between(P[i + 1] - P[i], d))
-        if constrained:
-            constrain_bone(P, R, i, limits)
-
-
-@njit(cache=True)
-def jacobian(P, n):
-    """Positional Jacobian of the end effector for rotations about world x, y, z at every joint."""
-    J = np.zeros((3, 3 * n))
-    end = P[n]
-    for i in range(n):
-        r = end - P[i]
-        for a in range(3):
-            axis = np.zeros(3)
-            axis[a] = 1.0
-            J[:, 3 * i + a] = vcross(axis, r)
-    return J
-
-
-@njit(cache=True)
-def apply_angles(P, R, dtheta):
-    n = R.shape[0]
-    for i in range(n):
-        w = dtheta[3 * i: 3 * i + 3]
-        angle = vnorm(w)
-        if angle > 1e-12:
-            rotate_subchain(P, R, i, axis_angle(w / angle, angle))
-
-
-@njit(cache=True)
-def jt_step(P, R, target, limits, constrained):
-    """Jacobian transpose (thesis 3.5.1) with the step that minimises the new error (Buss 2004):
-    alpha = <e, J J^T e> / <J J^T e, J J^T e>."""
-    n = R.shape[0]
-    J = jacobian(P, n)
-    e = target - P[n]
-    g = J.T @ e
-    jje = J @ g
-    denom = jje @ jje
-    if denom < EPS:
-        return
-    apply_angles(P, R, g * ((e @ jje) / denom))
-    if constrained:
-        constrain_chain(P, R, limits)
-
-
-@njit(cache=True)
-def dls_step(P, R, target, limits, constrained):
-    """Damped least squares (thesis 3.5.1): dtheta = J^T (J J^T + lambda^2 I)^-1 e, lambda = 1.1."""
-    n = R.shape[0]
-    J = jacobian(P, n)
-    e = target - P[n]
-    A = J @ J.T + (DLS_LAMBDA * DLS_LAMBDA) * np.eye(3)
-    apply_angles(P, R, J.T @ np.linalg.solve(A, e))
-    if constrained:
-        constrain_chain(P, R, limits)
-
-
-@njit(cache=True)
 def _step(solver, P, R, target, limits, constrained):
-    if solver == CCD:
-        ccd_step(P, R, target, limits, constrained)
-    elif solver == FABRIK:
-        fabrik_step(P, R, target, limits, constrained)
-    elif solver == JACOBIAN_TRANSPOSE:
-        jt_step(P, R, target, limits, constrained)
-    else:
-        dls_step(P, R, target, limits, constrained)
+    """One iteration of the solver at ``solver`` in SOLVERS."""
+    i = 0
+    for step in literal_unroll(STEPS):
+        if i == solver:
+            step(P, R, target, limits, constrained)
+        i += 1
 
 
 @njit(cache=True)

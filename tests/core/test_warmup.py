@@ -9,8 +9,11 @@ from mocap_core.ik.solvers import SOLVERS
 from tests.conftest import REPO
 
 
-def test_the_warm_up_parts_cover_every_solver():
-    assert set(SOLVERS) <= set(warmup.PARTS)
+def test_the_solvers_part_solves_with_every_solver(monkeypatch):
+    seen = []
+    monkeypatch.setattr(warmup, "_warm_limb", lambda solver, options: seen.append(solver))
+    warmup.warm_up(("solvers",), stamp=False)
+    assert seen == list(SOLVERS)
 
 
 def test_the_stamp_follows_the_kernel_sources(tmp_path, monkeypatch):
@@ -45,7 +48,7 @@ def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
     from nodes.registry import load_kind
 
     gapfill = load_kind("ik_gapfill")
-    assert gapfill.kernels(gapfill.Params(limb="left_arm", solver="fabrik")) == ("fabrik", "rotations")
+    assert gapfill.kernels(gapfill.Params(limb="left_arm", solver="fabrik")) == ("solvers", "rotations")
     assert gapfill.kernels(gapfill.Params(limb="left_arm", preset="studio"))[0] == "beyond"
     hips = load_kind("hip_interpolation")
     assert hips.kernels(hips.Params()) == ()
@@ -54,7 +57,27 @@ def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
         cls = load_kind(kind)
         params = cls.Params(limb="torso") if kind == "ik_gapfill" else cls.Params()
         assert set(cls.kernels(params)) <= set(warmup.PARTS), kind
-    assert warmup.pipeline_parts("thesis", "dls") == ("localization", "rotations", "dls")
-    assert set(warmup.pipeline_parts("studio", "ccd")) == {"localization", "rotations", "rebuild", "pose_memory",
+    assert warmup.pipeline_parts("thesis") == ("localization", "rotations", "solvers")
+    assert set(warmup.pipeline_parts("studio")) == {"localization", "rotations", "rebuild", "pose_memory",
                                                           "pair_guard", "beyond", "blend"}
-    assert warmup.pipeline_parts("studio", "ccd", fill_gaps=False) == ("localization", "rotations")
+    assert warmup.pipeline_parts("studio", fill_gaps=False) == ("localization", "rotations")
+
+
+def test_a_change_of_kernel_sources_drops_every_cached_kernel(tmp_path, monkeypatch):
+    # a kernel's cache is checked against its own file only: one compiled against an older callee must go too
+    package = tmp_path / "pkg"
+    (package / "__pycache__").mkdir(parents=True)
+    (package / "sub" / "__pycache__").mkdir(parents=True)
+    caches = [package / "__pycache__" / "a.f-1.py311.nbi", package / "sub" / "__pycache__" / "b.g-2.py311.1.nbc"]
+    for path in caches:
+        path.write_bytes(b"x")
+    monkeypatch.setattr(warmup, "PACKAGE", package)
+    monkeypatch.setattr(warmup, "CACHED_SOURCES", package / "__pycache__" / "numba-sources")
+    warmup._drop_stale_caches("sources 1")  # no record of what they were compiled from: dropped
+    assert not any(path.exists() for path in caches)
+    for path in caches:
+        path.write_bytes(b"x")
+    warmup._drop_stale_caches("sources 1")  # compiled from these sources: kept
+    assert all(path.exists() for path in caches)
+    warmup._drop_stale_caches("sources 2")
+    assert not any(path.exists() for path in caches)
