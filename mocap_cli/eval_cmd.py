@@ -12,9 +12,10 @@ from typing import get_args
 from tqdm import tqdm
 
 from mocap_cli.measure import LAYOUTS
-from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, blend_lag, gap_run, gap_windows, localize_take,
-                                    measured_joints, real_gap_moves, transition_moves, worst_case_timing)
-from mocap_core.fill_options import HELP as FILL_HELP, STUDIO, FillOptions
+from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, Gap, GapTake, blend_lag, gap_run, gap_windows,
+                                    localize_take, measured_joints, real_gap_moves, transition_moves,
+                                    worst_case_timing)
+from mocap_core.fill_options import HELP as FILL_HELP, STUDIO, FillOptions, HipOptions
 from mocap_core.hip_interpolation import WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
@@ -228,14 +229,12 @@ def run_gaps(args) -> int:
     partial = None
     if args.rebuild:  # (the studio's: a landmark that is the mean of several markers kept while some are seen)
         partial = PartialMeans(pipe.landmark_map).fill_landmarks(rec.positions, landmarks)
+    take = GapTake(landmarks, reference, profile, rec.rate_hz, tracking, pipe.landmark_map.tracking_of, partial)
+    hips = HipOptions(when_lost=args.hips_lost, rebuild=args.rebuild, pose_memory=args.pose_memory,
+                      pair_guard=args.pair_guard)
     combos = [(m, c, s) for m in modes for c in cons for s in solvers]
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
-        runs.append(gap_run(landmarks, reference, profile, joints, start, stop, solver, constrained, mode,
-                            fill_options=options,
-                            hips_lost=args.hips_lost, rebuild=args.rebuild,
-                            tracking=tracking, tracking_of=pipe.landmark_map.tracking_of,
-                            pose_memory=args.pose_memory, short_gaps=short_gaps, rate_hz=rec.rate_hz,
-                            partial=partial, pair_guard=args.pair_guard))
+        runs.append(gap_run(take, Gap(joints, start, stop, mode, short_gaps), solver, constrained, hips, options))
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     rows = []

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mocap_core.fill_options import FillOptions
+from mocap_core.fill_options import FillOptions, HipOptions
 from mocap_core.gapfill import GapFiller
 from mocap_core.hip_interpolation import HIP_LANDMARKS, HipInterpolator
 from mocap_core.ik.solvers import SolverParams
@@ -154,65 +154,80 @@ class GapRun:
                 "variance": e.var(), "missing": int((~np.isfinite(self.error_m[:, j])).sum())}
 
 
-def gap_run(landmarks: np.ndarray, reference: np.ndarray, profile: Profile, joints: list[str], start: int,
-            stop: int, solver: str, constraints: bool, mode: str, params: SolverParams | None = None,
-            fill_options: FillOptions | None = None, hips_lost: str = "hold", rebuild: bool = False,
-            tracking: np.ndarray | None = None, tracking_of: tuple[str, ...] = (),
-            pose_memory: bool = False, short_gaps: tuple[int, int] | None = None,
-            rate_hz: float | None = None, partial: tuple[np.ndarray, np.ndarray] | None = None,
-            pair_guard: bool = False) -> GapRun:
-    """Hide ``joints`` (and landmarks named in it) in frames [start, stop) and fill them; compare
-    with the complete take. ``short_gaps`` (length, every), frames: hide them instead in gaps of
-    ``length`` frames, one starting every ``every`` frames from ``start`` on (a studio's occlusions are
-    mostly short: a tenth of a second or less). ``rate_hz``: the take's rate, which
-    paces the fill's blends. ``rebuild``: lost limb landmarks rebuilt from their segment's others and
-    from the profile's tracking markers (``tracking``, frames x markers x 3; ``tracking_of``: the
-    segment of each, LandmarkMap.tracking_of), which stay seen. ``pose_memory``: lost knee and ankle
-    landmarks from the take's earlier poses (mocap_core.pose_memory), after the rebuild. ``pair_guard``: a bony
-    pair whose spacing jumped dropped first (mocap_core.pair_guard). ``partial``: the
-    take's landmarks kept from some of their markers and their mask (PartialMeans.fill_landmarks of the whole
-    take), which fill those still lost after the rebuild and the pose memory, as in the hip node; not the
-    hidden ones."""
+@dataclass
+class GapTake:
+    """A take as gap_run fills it: its landmarks (F, n_landmarks, 3), the complete take's solve to measure against
+    (F, joints, 3), its profile and rate (which paces the fill's blends); the profile's tracking markers (F, n, 3)
+    and the segment of each (LandmarkMap.tracking_of), which stay seen; ``partial``: its landmarks kept from some of
+    their markers and their mask (PartialMeans.fill_landmarks of the whole take), which fill those still lost after
+    the rebuild and the pose memory, as in the hip node, but not the hidden ones."""
+    landmarks: np.ndarray
+    reference: np.ndarray
+    profile: Profile
+    rate_hz: float | None = None
+    tracking: np.ndarray | None = None
+    tracking_of: tuple[str, ...] = ()
+    partial: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@dataclass
+class Gap:
+    """``joints`` hidden in frames [start, stop): their landmarks (mode "markers") or the joints themselves
+    ("joint"); ``short_gaps`` (length, every), frames: in gaps of ``length`` frames instead, one starting every
+    ``every`` frames from ``start`` on (a studio's occlusions are mostly short: a tenth of a second or less)."""
+    joints: list[str]
+    start: int
+    stop: int
+    mode: str = "markers"
+    short_gaps: tuple[int, int] | None = None
+
+
+def gap_run(take: GapTake, gap: Gap, solver: str = "ccd", constraints: bool = True,
+            hips: HipOptions | None = None, fills: FillOptions | None = None,
+            params: SolverParams | None = None) -> GapRun:
+    """Hide the gap's joints in the take and fill them with the hip stage's ``hips`` (the pelvis when lost; lost
+    limb landmarks rebuilt, recalled, a bony pair whose spacing jumped dropped), the solver and the fills; compare
+    with the complete take."""
     from mocap_core.landmark_fills import LandmarkFills
     from mocap_core.localization import Localizer
 
-    hidden = joints
-    joints = measured_joints(hidden, mode)
+    hips, landmarks, rate_hz = hips or HipOptions(), take.landmarks, take.rate_hz
+    joints = measured_joints(gap.joints, gap.mode)
     jidx = [INDEX[j] for j in joints]
-    windows = gap_windows(start, stop, *(short_gaps or (stop - start, stop - start)))
-    gap = np.zeros(len(landmarks), bool)
+    windows = gap_windows(gap.start, gap.stop, *(gap.short_gaps or (gap.stop - gap.start,) * 2))
+    hidden = np.zeros(len(landmarks), bool)
     for a, b in windows:
-        gap[a:b] = True
+        hidden[a:b] = True
     lm = landmarks.copy()
     hidden_lm = np.zeros(lm.shape[:2], bool)
-    if mode == "markers":
-        for j in hidden:
+    if gap.mode == "markers":
+        for j in gap.joints:
             for name in landmarks_of(j):
-                hidden_lm[gap, LANDMARK_INDEX[name]] = True
+                hidden_lm[hidden, LANDMARK_INDEX[name]] = True
         lm[hidden_lm] = np.nan
-    lm, _ = HipInterpolator(when_lost=hips_lost).fill_landmarks(lm)
+    lm, _ = HipInterpolator(when_lost=hips.when_lost).fill_landmarks(lm)
     # the profile's landmarks: those the complete take has somewhere
     present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
     frame_s = 1.0 / rate_hz if rate_hz else float("nan")
-    lm, rebuilt = LandmarkFills(rebuild, pose_memory, tracking_of, present, pair_guard=pair_guard).fill_landmarks(
-        lm, tracking, np.arange(len(lm)) * frame_s)
-    if partial is not None:  # (given whole, not LandmarkFills' own: it would keep the hidden landmarks from markers)
-        kept = partial[1] & ~hidden_lm & np.isnan(lm).any(axis=2)
-        lm[kept] = partial[0][kept]
+    lm, rebuilt = LandmarkFills(hips.rebuild, hips.pose_memory, take.tracking_of, present,
+                                pair_guard=hips.pair_guard).fill_landmarks(lm, take.tracking, np.arange(len(lm)) * frame_s)
+    if take.partial is not None:  # (given whole, not LandmarkFills' own: it would keep the hidden landmarks from markers)
+        kept = take.partial[1] & ~hidden_lm & np.isnan(lm).any(axis=2)
+        lm[kept] = take.partial[0][kept]
         rebuilt = kept if rebuilt is None else rebuilt | kept
-    loc = Localizer(profile.body).localize(lm, rebuilt)
+    loc = Localizer(take.profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
-    if mode == "joint":
+    if gap.mode == "joint":
         for j in jidx:
-            pos[gap, j] = np.nan
-            frames[gap, j] = np.nan
-            status[gap, j] = Status.MISSING
+            pos[hidden, j] = np.nan
+            frames[hidden, j] = np.nan
+            status[hidden, j] = Status.MISSING
     filler = GapFiller(solver, (params or SolverParams())._replace(constraints=constraints),
-                       options=fill_options or FillOptions())
+                       options=fills or FillOptions())
     for f in range(len(pos)):
         filler.fill(pos[f], frames[f], status[f], f * frame_s)
-    err = np.linalg.norm(pos[gap][:, jidx] - reference[gap][:, jidx], axis=-1)
-    return GapRun(solver, constraints, mode, joints, np.flatnonzero(gap), pos[:, jidx], status[:, jidx], err,
+    err = np.linalg.norm(pos[hidden][:, jidx] - take.reference[hidden][:, jidx], axis=-1)
+    return GapRun(solver, constraints, gap.mode, joints, np.flatnonzero(hidden), pos[:, jidx], status[:, jidx], err,
                   windows)
 
 

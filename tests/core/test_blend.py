@@ -6,8 +6,8 @@ import pytest
 
 from mocap_core import analytic_fill as af
 from mocap_core import blend
-from mocap_core.experiments import gap_run, transition_moves
-from mocap_core.fill_options import STUDIO, FillOptions
+from mocap_core.experiments import Gap, GapTake, gap_run, transition_moves
+from mocap_core.fill_options import STUDIO, FillOptions, HipOptions
 from mocap_core.gapfill import LimbFiller
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import load_profile
@@ -380,9 +380,9 @@ def test_short_gaps_on_a_dancers_elbow():
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
     runs = {}
     for half_life in (0.0, HALF_LIFE):
-        runs[half_life] = gap_run(landmarks, reference, prof, ["elbow_l"], int(rec.rate_hz), rec.n_frames, "ccd",
-                                  True, "markers", fill_options=STUDIO.model_copy(update={"blend_half_life_s": half_life}),
-                                  short_gaps=(6, 30), rate_hz=rec.rate_hz)
+        runs[half_life] = gap_run(GapTake(landmarks, reference, prof, rec.rate_hz),
+                                  Gap(["elbow_l"], int(rec.rate_hz), rec.n_frames, short_gaps=(6, 30)),
+                                  fills=STUDIO.model_copy(update={"blend_half_life_s": half_life}))
     mean = {h: float(np.nanmean(r.error_m)) for h, r in runs.items()}
     moves = {h: transition_moves(r, reference)[0] for h, r in runs.items()}
     assert len(runs[HALF_LIFE].windows) > 40
@@ -430,9 +430,9 @@ def test_short_gaps_on_a_dancers_knee_and_ankle():
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
     means, moves = {}, {}
     for course in (False, True):
-        run_ = gap_run(landmarks, reference, prof, ["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, "ccd",
-                       True, "markers", fill_options=STUDIO.model_copy(update={"blend_course": course}), pose_memory=True,
-                       short_gaps=(6, 30), rate_hz=rec.rate_hz)
+        run_ = gap_run(GapTake(landmarks, reference, prof, rec.rate_hz),
+                       Gap(["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, short_gaps=(6, 30)),
+                       hips=HipOptions(pose_memory=True), fills=STUDIO.model_copy(update={"blend_course": course}))
         means[course] = np.nanmean(run_.error_m, axis=0)
         moves[course] = transition_moves(run_, reference)
     assert (means[True] < 0.014).all() and (means[True] < 0.75 * means[False]).all(), means
@@ -451,8 +451,9 @@ def test_short_gaps_on_another_dancers_knee_and_ankle_come_back_without_a_twitch
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
     landmarks = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
-    run_ = gap_run(landmarks, reference, prof, ["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, "ccd", True,
-                   "markers", fill_options=STUDIO, pose_memory=True, short_gaps=(6, 30), rate_hz=rec.rate_hz)
+    run_ = gap_run(GapTake(landmarks, reference, prof, rec.rate_hz),
+                   Gap(["knee_l", "ankle_l"], int(rec.rate_hz), rec.n_frames, short_gaps=(6, 30)),
+                   hips=HipOptions(pose_memory=True), fills=STUDIO)
     assert (np.nanmean(run_.error_m, axis=0) < 0.013).all(), np.nanmean(run_.error_m, axis=0)
     for move in transition_moves(run_, reference):
         assert move["loss_added_ratio"] < 1.5 and move["return_added_ratio"] < 1.5, move

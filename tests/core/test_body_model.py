@@ -2,8 +2,8 @@
 import numpy as np
 
 from mocap_core.body_model import MAX_SPEED_M_S, MAX_WEIGHT, MIN_SAMPLES, BodyModel
-from mocap_core.experiments import gap_run
-from mocap_core.fill_options import STUDIO, FillOptions
+from mocap_core.experiments import Gap, GapTake, gap_run
+from mocap_core.fill_options import STUDIO, FillOptions, HipOptions
 from mocap_core.gapfill import LimbFiller
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.localization import Localizer
@@ -250,10 +250,10 @@ def test_a_leg_whose_hinge_drops_out_is_held_not_handed_to_the_end_model():
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
     lm = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
-    runs = {on: gap_run(lm, reference, prof, ["knee_r", "ankle_r"], int(rec.rate_hz), rec.n_frames, "ccd", True,
-                        "markers", fill_options=STUDIO.model_copy(update={"end_model": on}), rebuild=True,
-                        tracking=pipe.landmark_map.tracking(rec.positions), tracking_of=pipe.landmark_map.tracking_of,
-                        rate_hz=rec.rate_hz) for on in (False, True)}
+    take = GapTake(lm, reference, prof, rec.rate_hz, pipe.landmark_map.tracking(rec.positions),
+                   pipe.landmark_map.tracking_of)
+    runs = {on: gap_run(take, Gap(["knee_r", "ankle_r"], int(rec.rate_hz), rec.n_frames), hips=HipOptions(rebuild=True),
+                        fills=STUDIO.model_copy(update={"end_model": on})) for on in (False, True)}
     np.testing.assert_allclose(runs[True].error_m, runs[False].error_m, atol=1e-9)
 
 

@@ -1,8 +1,8 @@
 """The pair guard drops a bony pair whose spacing jumps (a marker put wrong by the cameras) until it is back."""
 import numpy as np
 
-from mocap_core.experiments import gap_run
-from mocap_core.fill_options import STUDIO
+from mocap_core.experiments import Gap, GapTake, gap_run
+from mocap_core.fill_options import STUDIO, HipOptions
 from mocap_core.pair_guard import PAIR_STEADY_S, PairGuard
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
@@ -82,8 +82,8 @@ def test_walk2_left_elbow_meets_issue_9s_target_with_its_wrist_glitch_dropped():
     pipe = SkeletonPipeline(prof, rec.labels, fill_gaps=False)
     lm = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
-    runs = {guard: gap_run(lm, reference, prof, ["elbow_l"], int(rec.rate_hz), rec.n_frames, "ccd", True, "markers",
-                           fill_options=STUDIO, rate_hz=rec.rate_hz, pair_guard=guard).stats()
+    runs = {guard: gap_run(GapTake(lm, reference, prof, rec.rate_hz), Gap(["elbow_l"], int(rec.rate_hz), rec.n_frames),
+                           hips=HipOptions(pair_guard=guard), fills=STUDIO).stats()
             for guard in (False, True)}
     assert runs[True]["mean"] < 0.02 and runs[True]["max"] < 0.06, runs[True]
     assert runs[False]["max"] > 0.09, runs[False]

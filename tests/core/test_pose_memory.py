@@ -1,8 +1,8 @@
 """The pose memory (mocap_core.pose_memory): lost knee and ankle landmarks from the take's earlier poses."""
 import numpy as np
 
-from mocap_core.experiments import gap_run
-from mocap_core.fill_options import STUDIO
+from mocap_core.experiments import Gap, GapTake, gap_run
+from mocap_core.fill_options import STUDIO, HipOptions
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.ik.kernels import rotation_vector, turned_by
 from mocap_core.localization import hip_centres
@@ -120,10 +120,10 @@ def _dance_gap(take: str, side: str, memory: bool, start_s: float = 5.0, stop_s:
     lm = pipe.landmark_map.apply(rec.positions)
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
     stop = rec.n_frames if stop_s is None else int(stop_s * rec.rate_hz)
-    run = gap_run(lm, reference, prof, [f"knee_{side}", f"ankle_{side}"], int(start_s * rec.rate_hz), stop,
-                  "ccd", True, "markers", fill_options=STUDIO, pose_memory=memory,
-                  tracking=pipe.landmark_map.tracking(rec.positions) if toe_line else None,
-                  tracking_of=pipe.landmark_map.tracking_of, rate_hz=rec.rate_hz)
+    take = GapTake(lm, reference, prof, rec.rate_hz, pipe.landmark_map.tracking(rec.positions) if toe_line else None,
+                   pipe.landmark_map.tracking_of)
+    run = gap_run(take, Gap([f"knee_{side}", f"ankle_{side}"], int(start_s * rec.rate_hz), stop),
+                  hips=HipOptions(pose_memory=memory), fills=STUDIO)
     return run.stats(0)["mean"], run.stats(1)["mean"]
 
 

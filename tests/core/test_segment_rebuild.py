@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from mocap_core.experiments import gap_run
-from mocap_core.fill_options import STUDIO
+from mocap_core.experiments import Gap, GapTake, gap_run
+from mocap_core.fill_options import STUDIO, HipOptions
 from mocap_core.geometry import rigid_fit
 from mocap_core.localization import Localizer
 from mocap_core.pipeline import SkeletonPipeline
@@ -561,10 +561,10 @@ def _gap(take, profile, joints, start_s, stop_s=None, part=None, rebuilds=(False
     reference = pipe.solve_landmarks(pipe.landmarks(rec.positions)).positions
     start = int(start_s * rec.rate_hz)
     stop = rec.n_frames if stop_s is None else int(stop_s * rec.rate_hz)
-    return {rebuild: gap_run(lm, reference, prof, joints, start, stop, "ccd", True, "markers",
-                             fill_options=STUDIO, rebuild=rebuild,
-                             tracking=pipe.landmark_map.tracking(rec.positions),
-                             tracking_of=pipe.landmark_map.tracking_of, rate_hz=rec.rate_hz) for rebuild in rebuilds}
+    take = GapTake(lm, reference, prof, rec.rate_hz, pipe.landmark_map.tracking(rec.positions),
+                   pipe.landmark_map.tracking_of)
+    return {rebuild: gap_run(take, Gap(joints, start, stop), hips=HipOptions(rebuild=rebuild), fills=STUDIO)
+            for rebuild in rebuilds}
 
 
 def test_sprint_elbow_rebuilt_from_the_olecranon_and_styloids():
