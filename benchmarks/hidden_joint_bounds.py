@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from mocap_cli.rigid_eval import TAKES, load_take  # noqa: E402
+from mocap_cli.rigid_eval import add_take_args, load_take, take_names  # noqa: E402
 from mocap_core.fit.compare import cases  # noqa: E402
 from mocap_core.fit.take import fit_take  # noqa: E402
-from mocap_core.skeleton import INDEX, PARENT_INDEX  # noqa: E402
+from mocap_core.skeleton import INDEX, PARENT_INDEX, children  # noqa: E402
 
 NEIGHBOURS = 5
 # The middle joint: the bone whose frame describes the end's place, and the axis of that frame (columns x left,
@@ -72,7 +72,7 @@ def in_frame(P, R, bone: int, points):
 
 def swivel(P, R, middle: str, side: str, away: int) -> np.ndarray:
     mid = INDEX[f"{middle}_{side}"]
-    root, end = PARENT_INDEX[mid], [j for j in range(len(PARENT_INDEX)) if PARENT_INDEX[j] == mid][0]
+    root, end = PARENT_INDEX[mid], INDEX[children(f"{middle}_{side}")[0]]
     body, axis, sign = CHAINS[middle]
     b = INDEX[body]
     return circle_guess(P[:, root], P[:, end] - P[:, root], P[:, mid], sign * R[:, b, :, axis],
@@ -101,15 +101,11 @@ def report(errors: np.ndarray, start: int) -> str:
 def main() -> int:
     np.seterr(invalid="ignore", divide="ignore")  # frames where a marker is lost: NaN, left out of the figures
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--takes", default=",".join(TAKES), help=f"comma-separated, of: {', '.join(TAKES)}")
+    add_take_args(ap)
     args = ap.parse_args()
     print("mean / max mm after 1 s; targets: worst case 60 / 150, elbow 15 / 50, knee + ankle mean 20")
-    names = [t.strip() for t in args.takes.split(",") if t.strip()]
-    unknown = [t for t in names if t not in TAKES]
-    if unknown:
-        raise SystemExit(f"hidden_joint_bounds: unknown take {unknown[0]!r} (takes: {', '.join(TAKES)})")
-    for name in names:
-        rec, profile = load_take(name, 20.0)
+    for name in take_names("hidden_joint_bounds", args.takes):
+        rec, profile = load_take(name, args.seconds)
         markers = rec.positions.astype(np.float64)
         chunk, _, subject = fit_take(markers, rec.labels, profile, rec.rate_hz)
         P, R = chunk.positions, chunk.frames

@@ -34,7 +34,7 @@ def _take(name: str, seconds: float, option: str) -> tuple[str, str, dict[str, f
 def run(args) -> int:
     from mocap_core.warmup import ensure_compiled
 
-    names = take_names("options", args.takes)
+    names = take_names("mocap eval options", args.takes)
     ensure_compiled(logging.getLogger("mocap.eval"))
     jobs = [(name, args.seconds, option) for name in names for option in (STUDIO, *LEFT_OUT)]
     rows = []

@@ -42,12 +42,12 @@ def add_take_args(parser) -> None:
     parser.add_argument("--seconds", type=float, default=20.0, help="at most this much of each take (default 20)")
 
 
-def take_names(command: str, takes: str) -> list[str]:
+def take_names(program: str, takes: str) -> list[str]:
     """The --takes list, an unknown name refused with the known ones."""
     names = [t.strip() for t in takes.split(",") if t.strip()]
     unknown = [t for t in names if t not in TAKES]
     if unknown:
-        raise SystemExit(f"mocap eval {command}: unknown take {unknown[0]!r} (takes: {', '.join(TAKES)})")
+        raise SystemExit(f"{program}: unknown take {unknown[0]!r} (takes: {', '.join(TAKES)})")
     return names
 
 
@@ -61,7 +61,7 @@ def load_take(name: str, seconds: float):
 
 def run(args) -> int:
     rows = []
-    for name in tqdm(take_names("rigid", args.takes), desc="takes", unit="take"):
+    for name in tqdm(take_names("mocap eval rigid", args.takes), desc="takes", unit="take"):
         rec, profile = load_take(name, args.seconds)
         reference = references(rec, profile)
         for case in cases(profile, rec.labels, int(round(rec.rate_hz))):

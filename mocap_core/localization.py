@@ -268,9 +268,9 @@ def _localize_frame(lm, pos, frames, used, body, sums, counts):
     height, mass, cd, sw = _body_sizes(lm, body, n_vec, sums, counts)
     used[0], used[1], used[2], used[3] = height, mass, cd, sw
     # shoulders (3.4.2; Campbell et al. 2009) from the acromion, in the chest frame: medial, up, forward
-    acromion_to_joint = np.array([(96.2 - 0.302 * cd - 0.364 * height + 0.385 * mass) / 1000,
-                                  (-66.32 + 0.30 * cd - 0.432 * mass) / 1000,
-                                  (66.468 - 0.531 * sw + 0.571 * mass) / 1000])
+    acromion_to_joint = ((96.2 - 0.302 * cd - 0.364 * height + 0.385 * mass) / 1000,
+                         (-66.32 + 0.30 * cd - 0.432 * mass) / 1000,
+                         (66.468 - 0.531 * sw + 0.571 * mass) / 1000)
     for side in range(2):
         _arm(lm, pos, frames, side, sc, r_chest, acromion_to_joint, body[3] + marker_r)
         _leg(lm, pos, frames, side, r_hip, hips, body[4] + marker_r, body[5] + marker_r)
@@ -364,7 +364,7 @@ def _arm(lm, pos, frames, side, sc, r_chest, acromion_to_joint, elbow_off):
     arm_sign = 1.0 if side == 0 else -1.0          # flexion-axis sign that points medially
     c_left, c_up, c_fwd = r_chest[:, 0].copy(), r_chest[:, 1].copy(), r_chest[:, 2].copy()
     medial_trunk = -c_left if side == 0 else c_left
-    gx, gy, gz = acromion_to_joint[0], acromion_to_joint[1], acromion_to_joint[2]
+    gx, gy, gz = acromion_to_joint
     shoulder = lm[M[M_SAE]] + gx * medial_trunk + gy * c_up + gz * c_fwd
     hle, hme, rsp, usp, hand = lm[M[M_HLE]], lm[M[M_HME]], lm[M[M_RSP]], lm[M[M_USP]], lm[M[M_HM2]]
     wrist = 0.5 * (rsp + usp)

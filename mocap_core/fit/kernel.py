@@ -199,7 +199,7 @@ def _marker_task(H, g, P, R, markers, tree, robust_m, weights):
     """Add every seen marker's residual from its calibrated place to the normal equations (H, g), Cauchy-weighted
     by ``robust_m``; ``weights`` gets each marker's robust weight (0: unseen or on no bone)."""
     x, bone, c, w_marker = markers
-    chains, slot = tree[3], tree[2]
+    _, _, slot, chains, _ = tree
     a = np.empty((chains.shape[1], 3))
     for m in range(x.shape[0]):
         b = bone[m]
@@ -224,7 +224,7 @@ def _motion_task(H, g, root, R, motion, tree):
     """The motion and posture tasks: each bone's local rotation (the root's world one) near its prediction and
     near the subject's usual one, the root near its predicted position."""
     root_pred, L_pred, w_rot, w_root, L_rest, w_rest = motion
-    parent, slot, rotating = tree[0], tree[2], tree[4]
+    parent, _, slot, _, rotating = tree
     for i in range(3):
         H[i, i] += w_root
         g[i] += w_root * (root_pred[i] - root[i])
@@ -247,7 +247,7 @@ def _motion_task(H, g, root, R, motion, tree):
 def _step(root, R, d, tree):
     """Apply the step ``d`` (the root's move, then each rotating bone's world-frame turn); returns its largest
     component."""
-    parent, slot, rotating = tree[0], tree[2], tree[4]
+    parent, _, slot, _, rotating = tree
     root += d[:3]
     old = R.copy()
     for k in range(R.shape[0]):
