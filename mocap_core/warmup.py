@@ -209,8 +209,13 @@ def _warm_limb(solver: str, options) -> None:
 
 
 def fingerprint() -> str:
-    """The kernel sources (every module with cached numba code), numba's and Python's versions."""
-    h = hashlib.sha256(f"{version('numba')} {sys.version}".encode())
+    """The kernel sources (every module with cached numba code), numba's and Python's versions and the CPU the
+    kernels are compiled for: numba keys its cache on the CPU's name and features too, so a checkout (or an image)
+    moved to another CPU finds none of its kernels, and would compile them in every node process at once."""
+    from numba.core.registry import cpu_target
+
+    cpu = cpu_target.target_context.codegen().magic_tuple()  # (starts LLVM: numba needs it to load kernels anyway)
+    h = hashlib.sha256(f"{version('numba')} {sys.version} {cpu}".encode())
     for path in sorted(PACKAGE.rglob("*.py")):
         text = path.read_bytes()
         if b"cache=True" in text:

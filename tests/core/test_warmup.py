@@ -28,6 +28,19 @@ def test_the_stamp_follows_the_kernel_sources(tmp_path, monkeypatch):
     assert not warmup.kernels_cached(("localization",))
 
 
+def test_kernels_compiled_for_another_cpu_do_not_count(tmp_path, monkeypatch):
+    # numba keys its cache on the CPU: a checkout or an image moved to another machine has to compile again
+    from numba.core.registry import cpu_target
+
+    monkeypatch.setattr(warmup, "STAMP", tmp_path / "stamp")
+    warmup.warm_up(("rotations",))
+    assert warmup.kernels_cached(("rotations",))
+    codegen = cpu_target.target_context.codegen()
+    here = codegen.magic_tuple()
+    monkeypatch.setattr(type(codegen), "magic_tuple", lambda self: (here[0], "another-cpu", here[2]))
+    assert not warmup.kernels_cached(("rotations",))
+
+
 def test_the_launcher_compiles_the_kernels_its_graph_runs_up_front(tmp_path):
     stamp = tmp_path / "stamp"
     launch = tmp_path / "g.yaml"
