@@ -20,9 +20,9 @@ import math
 import numpy as np
 from numba import njit
 
+from mocap_core.skeleton import ESTIMATED, HELD, LOCATED, MISSING
 from mocap_core.ik.kernels import angle_about, axis_angle, mm, mtv, mv, rotation_between, vcross, vdot, vnorm
 
-MISSING, LOCATED, ESTIMATED, HELD = 0, 1, 2, 3   # mocap_core.skeleton.Status
 MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
 # Where on the swivel circle: the bone's direction in the next joint's frame nearest its usual one,
 # every component weighted by 1 / (its variance + SD_FLOOR^2), plus TURN_WEIGHT per squared radian

@@ -34,8 +34,8 @@ import numpy as np
 from numba import njit
 
 from mocap_core.frame_clock import next_frame_s
-from mocap_core.analytic_fill import (ESTIMATED, HELD, LOCATED, MISSING, all_finite, nearest_on_circle,
-                                     nearest_on_sphere)
+from mocap_core.analytic_fill import all_finite, nearest_on_circle, nearest_on_sphere
+from mocap_core.skeleton import ESTIMATED, HELD, LOCATED, MISSING
 from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vnorm
 
 # A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.

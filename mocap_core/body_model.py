@@ -21,9 +21,9 @@ import math
 import numpy as np
 from numba import njit
 
-from mocap_core.analytic_fill import LOCATED, MISSING, all_finite
+from mocap_core.analytic_fill import all_finite
 from mocap_core.ik.kernels import mtv
-from mocap_core.skeleton import END_SITES, INDEX, JOINTS
+from mocap_core.skeleton import END_SITES, INDEX, JOINTS, LOCATED, MISSING
 
 BODY_MODEL_HELP = ("beyond the thesis: a lone lost elbow or knee turned on its swivel circle towards where a "
                    "regression from the rest of the located body, learned online from this limb and the other "

@@ -43,9 +43,13 @@ class HipOptions(_StageOptions):
     pair_guard: bool = Field(False, description=PAIR_GUARD_HELP)
 
 
+# The fills that learn from the mirrored limb: the torso, which has none, runs without them.
+MIRROR_FILLS = ("body_model", "end_model")
+
+
 class FillOptions(_StageOptions):
     """Which fills run beside the thesis's IK. The limb memory and the body model steer the swivel, so they need it;
-    the body and end models and the limb memory act on the four limbs (the torso has no mirror to learn from)."""
+    the body and end models act on the four limbs only (MIRROR_FILLS)."""
     swivel: bool = Field(False, description=SWIVEL_HELP)
     segment_carry: bool = Field(False, description=SEGMENT_CARRY_HELP)
     limb_memory: bool = Field(False, description=LIMB_MEMORY_HELP + " (with swivel)")
@@ -62,6 +66,18 @@ class FillOptions(_StageOptions):
             raise ValueError(f"{' and '.join(idle)} steer the swivel, which is off: set swivel true, or "
                              f"{' and '.join(idle)} false")
         return self
+
+    def for_limb(self, limb: str) -> "FillOptions":
+        """These options as they act on ``limb``: the torso's without the fills that learn from a mirrored limb."""
+        return self.model_copy(update=dict.fromkeys(MIRROR_FILLS, False)) if limb == "torso" else self
+
+    def refuse_idle(self, limb: str) -> None:
+        """A ValueError, saying what to do, when a fill is asked for on a limb where it does nothing."""
+        idle = [name for name in MIRROR_FILLS if getattr(self, name)] if limb == "torso" else []
+        if idle:
+            names = " and ".join(idle)
+            raise ValueError(f"{names} learn{'s' if len(idle) == 1 else ''} from the mirrored limb, which the torso "
+                             f"has not: leave {names} out of the torso's params")
 
 
 # The studio's choice (the ``studio`` preset, mocap_core.presets): every option on.

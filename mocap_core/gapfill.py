@@ -40,18 +40,8 @@ from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import ChainLimits, KernelSolver, SolverParams, get_solver
 from mocap_core.ik.solvers_kernels import solve
 from mocap_core.limb_memory import LimbMemory
-from mocap_core.skeleton import INDEX, LIMBS, PARENT, Status
+from mocap_core.skeleton import ESTIMATED, HELD, INDEX, LIMBS, LOCATED, MISSING, PARENT
 
-MISSING, ESTIMATED, HELD = int(Status.MISSING), int(Status.ESTIMATED), int(Status.HELD)
-
-# The first joint of each limb chain; its position comes from the stage before.
-LIMB_CHAINS: dict[str, tuple[str, ...]] = {
-    "torso": ("spine0", "spine1", "spine3", "neck", "head", "head_top"),
-    "left_arm": LIMBS["left_arm"],
-    "right_arm": LIMBS["right_arm"],
-    "left_leg": LIMBS["left_leg"],
-    "right_leg": LIMBS["right_leg"],
-}
 # The limb whose poses, mirrored, each limb also remembers (limb memory).
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
 # A predicted end is put at most this share of the limb's reach from its root: the joints between stay bent.
@@ -75,14 +65,15 @@ class LimbFiller:
     def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, options: FillOptions = FillOptions()):
         """``options``: the fills beyond the thesis (none: the thesis's method)."""
-        if limb not in LIMB_CHAINS:
-            raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMB_CHAINS)})")
+        if limb not in LIMBS:
+            raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMBS)})")
+        options.refuse_idle(limb)
         self.limb = limb
         self.solver = get_solver(solver) if isinstance(solver, str) else solver
         self.params = (params or SolverParams()).typed()
         self.constraints = constraints or load_constraints()
-        self.joints = np.array([INDEX[j] for j in LIMB_CHAINS[limb]], dtype=np.int64)
-        self.parent_of_root = INDEX[PARENT[LIMB_CHAINS[limb][0]]]
+        self.joints = np.array([INDEX[j] for j in LIMBS[limb]], dtype=np.int64)
+        self.parent_of_root = INDEX[PARENT[LIMBS[limb][0]]]
         n = len(self.joints)
         self.prev_pos = np.full((n, 3), np.nan)        # the limb's last whole output
         self.prev_frames = np.full((n, 3, 3), np.nan)
@@ -111,7 +102,7 @@ class LimbFiller:
         self.chain_end = n               # the limb's joints up to its last one ever located
         self._chain = None               # and what the kernel takes of them (_chain_up_to)
         other = MIRRORED.get(limb)  # the other limb's chain, whose poses both memories learn too, mirrored
-        other_idx = None if other is None else np.array([INDEX[j] for j in LIMB_CHAINS[other]], dtype=np.int64)
+        other_idx = None if other is None else np.array([INDEX[j] for j in LIMBS[other]], dtype=np.int64)
         self.memory = LimbMemory(n, other_idx) if o.limb_memory else None
         self.no_recall = np.full((n, 3), np.nan)
         self.body_model, self.end_model = self._models(o, other_idx)
@@ -119,7 +110,7 @@ class LimbFiller:
         self.end_local = np.full(3, np.nan)  # the lost end's offset from the root where the gap began
         self.end_seen = False                 # and whether its markers were the end's last source
         self.end_since = 0.0                  # and how long the limb has been lost
-        self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMB_CHAINS[limb])
+        self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMBS[limb])
                                  if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
             if o.segment_carry else None
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
@@ -133,7 +124,7 @@ class LimbFiller:
         learned from the wrist's (ankle's) place from the shoulder (hip); the joints between then aim at it
         (Algorithm 1 held the limb as it was relative to its parent). Both learn from the other limb too, so
         the torso has neither."""
-        names = LIMB_CHAINS[self.limb]
+        names = LIMBS[self.limb]
         middle = [k for k, name in enumerate(names) if name in MODELLED]
         ends = [k for k, name in enumerate(names) if name in MODELLED_ENDS]
         if other_idx is None or not middle:
@@ -173,7 +164,7 @@ class LimbFiller:
                                          self.model_weight)
         # a limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
         # wrist (the hand, never seen, would keep the limb from ever being whole, and so from ever being filled)
-        self.seen |= status[idx] == af.LOCATED
+        self.seen |= status[idx] == LOCATED
         n = int(np.flatnonzero(self.seen)[-1]) + 1 if self.seen.any() else len(idx)
         if n != self.chain_end or self._chain is None:  # a joint seen for the first time: the limb is whole again
             self.chain_end, self.has_prev[0] = n, False        # only once it is seen
@@ -201,7 +192,7 @@ class LimbFiller:
         model.learn(positions, frames, status)
         idx, root, k = self.joints, model.root, model.k
         if status[idx[k]] != MISSING:  # seen, or put by the hip stage's fills (the leg hinge, say)
-            self.end_seen = status[idx[k]] == af.LOCATED
+            self.end_seen = status[idx[k]] == LOCATED
         # a limb whose better fill drops out for a few frames is held as that fill left it, not handed to the
         # model and back (each hand-over is a jump of its own)
         if not self.has_prev[0] or not (self.end_seen or all_finite(self.end_local)):
@@ -336,7 +327,8 @@ class GapFiller:
     def __init__(self, solver: str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, options: FillOptions = FillOptions()):
         constraints = constraints if constraints is not None else load_constraints()
-        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, options) for limb in LIMBS}  # the torso first
+        self.limbs = {limb: LimbFiller(limb, solver, params, constraints, options.for_limb(limb))
+                      for limb in LIMBS}  # the torso first
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:
         return {limb: f.fill(positions, frames, status, time_s) for limb, f in self.limbs.items()}

@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mocap_core.gapfill import LIMB_CHAINS
 from mocap_core.skeleton import INDEX, Status
 from mocap_core.skeleton import LIMBS as STAGES
 
@@ -22,7 +21,7 @@ RESTART_JUMP = 10  # frames
 # its inputs in turn, and after a stall a backlog of limbs can come first), not lost: they wait for it until a later
 # frame's torso shows it was lost on the way, or for this long.
 TORSO_LOST_S = 1.0
-LIMB_INDEX = {limb: np.array([INDEX[j] for j in LIMB_CHAINS[limb]]) for limb in LIMBS}
+LIMB_INDEX = {limb: np.array([INDEX[j] for j in STAGES[limb]]) for limb in LIMBS}
 
 
 @dataclass

@@ -21,8 +21,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocap_core.analytic_fill import LOCATED, MISSING, all_finite
+from mocap_core.analytic_fill import all_finite
 from mocap_core.ik.kernels import mtv, mv
+from mocap_core.skeleton import LOCATED, MISSING
 from mocap_core.remembered_poses import CAPACITY, keep, nearest  # per joint and source; a pose per 5 mm
 
 LIMB_MEMORY_HELP = ("beyond the thesis: the swivel of a lone missing joint pulled towards where the limb's earlier "

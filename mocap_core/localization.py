@@ -28,7 +28,7 @@ from mocap_core.ik.kernels import mtv, mv, vcross, vdot, vnorm
 from mocap_core.profiles import LANDMARK_INDEX as _L
 from mocap_core.profiles import BodyMeasurements
 from mocap_core.skeleton import INDEX as _J
-from mocap_core.skeleton import N_JOINTS, Status
+from mocap_core.skeleton import ESTIMATED, LOCATED, MISSING, N_JOINTS
 
 # Constants of the original code (facts 7.2), metres.
 MARKER_TO_SPINE_M = 0.08
@@ -42,7 +42,6 @@ DEFAULT_HALF_SHOULDER_WIDTH_MM = 200.0
 # and the width fallbacks lean on the pelvis/chest lateral axis instead (blend up to +0.25).
 STRAIGHT_SIN = 0.17
 
-LOCATED, MISSING, ESTIMATED = int(Status.LOCATED), int(Status.MISSING), int(Status.ESTIMATED)
 # The landmarks that locate each limb joint (both sides), for `mocap eval gaps --remove` and for
 # reporting joints from rebuilt landmarks as estimated.
 JOINT_LANDMARKS = {

@@ -23,8 +23,10 @@ class Options:
 PRESETS: dict[str, Options] = {"thesis": Options(), "studio": Options(STUDIO_HIPS, STUDIO)}
 
 
-def with_preset(stage: str, params):
-    """A node's raw params with its preset's values for ``stage`` ("hips", "ik") under the ones it gives."""
+def with_preset(stage: str, params, leave: tuple[str, ...] = ()):
+    """A node's raw params with its preset's values for ``stage`` ("hips", "ik") under the ones it gives, but for
+    those named in ``leave`` (which do nothing where the node runs)."""
     if not isinstance(params, dict) or params.get("preset", "thesis") not in PRESETS:
         return params  # pydantic says what is wrong
-    return {**getattr(PRESETS[params.get("preset", "thesis")], stage).model_dump(), **params}
+    preset = getattr(PRESETS[params.get("preset", "thesis")], stage).model_dump(exclude=set(leave))
+    return {**preset, **params}

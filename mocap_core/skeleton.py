@@ -49,9 +49,10 @@ PARENT_INDEX = np.array([-1 if p is None else INDEX[p] for _, p in _TREE], dtype
 END_SITES = frozenset({"head_top", "hand_l", "hand_r", "toe_l", "toe_r"})
 N_JOINTS = len(JOINTS)
 
-# The IK stages of the graph: the torso first, then the four limbs in parallel (DESIGN).
+# The IK stages of the graph, each with the chain of joints it fills: the torso first, then the four limbs in
+# parallel (DESIGN). A chain's root hangs from a joint the stage before placed (the pelvis, the sternum, the hips).
 LIMBS: dict[str, tuple[str, ...]] = {
-    "torso": ("pelvis", "spine0", "spine1", "spine3", "neck", "head", "head_top"),
+    "torso": ("spine0", "spine1", "spine3", "neck", "head", "head_top"),
     "left_arm": ("clavicle_l", "shoulder_l", "elbow_l", "wrist_l", "hand_l"),
     "right_arm": ("clavicle_r", "shoulder_r", "elbow_r", "wrist_r", "hand_r"),
     "left_leg": ("hip_l", "knee_l", "ankle_l", "foot_l", "toe_l"),
@@ -73,3 +74,5 @@ class Status(IntEnum):
 
 
 STATUS_NAMES = {s.value: s.name.lower() for s in Status}
+# The same, as plain ints: numba kernels read them as compile-time constants.
+MISSING, LOCATED, ESTIMATED, HELD = (int(s) for s in Status)

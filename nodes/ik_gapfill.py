@@ -12,8 +12,8 @@ import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
 from messages import LimbSolution, SkeletonFrame
-from mocap_core.fill_options import FillOptions
-from mocap_core.gapfill import LIMB_CHAINS, LimbFiller
+from mocap_core.fill_options import MIRROR_FILLS, FillOptions
+from mocap_core.gapfill import LimbFiller
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
@@ -38,7 +38,13 @@ class Params(FillOptions):
     @model_validator(mode="before")
     @classmethod
     def _preset(cls, values):
-        return with_preset("ik", values)
+        torso = isinstance(values, dict) and values.get("limb") == "torso"
+        return with_preset("ik", values, leave=MIRROR_FILLS if torso else ())
+
+    @model_validator(mode="after")
+    def _acts_on_the_limb(self):
+        self.refuse_idle(self.limb)
+        return self
 
 
 class IkGapfill(Node):
@@ -65,7 +71,7 @@ class IkGapfill(Node):
         p = self.params
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
                                  load_constraints(p.constraints_file), FillOptions.of(p))
-        self.names = list(LIMB_CHAINS[p.limb])
+        self.names = list(LIMBS[p.limb])
 
     def on_message(self, topic, msg: SkeletonFrame) -> None:
         pos, frames, status = from_message(msg)

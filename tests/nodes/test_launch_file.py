@@ -113,6 +113,11 @@ def test_preset_studio_is_the_gap_filling_beyond_the_thesis_and_a_param_beside_i
     with pytest.raises(ValueError, match="limb_memory and body_model steer the swivel, which is off"):
         IkParams.model_validate({"limb": "left_arm", "preset": "studio", "swivel": False})
     assert IkParams.model_validate({"limb": "torso"}).swivel is False          # the thesis's method by default
+    # the body and end models learn from the mirrored limb: the torso's preset leaves them out, a param is refused
+    assert FillOptions.of(IkParams.model_validate({"limb": "torso", "preset": "studio"})) == STUDIO.for_limb("torso")
+    assert not STUDIO.for_limb("torso").body_model and not STUDIO.for_limb("torso").end_model
+    with pytest.raises(ValueError, match="end_model learns from the mirrored limb, which the torso has not"):
+        IkParams.model_validate({"limb": "torso", "preset": "studio", "end_model": True})
     hips = HipParams.model_validate({"preset": "studio"})
     assert (hips.when_lost, hips.rebuild, hips.pose_memory, hips.pair_guard) == ("fit", True, True, True)
     with pytest.raises(ValueError, match="preset"):
