@@ -141,9 +141,9 @@ def partial_means_cost():
     back = [label.split(":")[-1] for label in rec.labels].index("LBSH")
     lost = rec.positions.copy()
     lost[:, back] = np.nan
-    seen = per_call_us(lambda i: means.fill(rec.positions[frames[i]], lmap.apply(rec.positions[frames[i]])),
+    seen = per_call_us(lambda i: means.fill(lmap.apply(rec.positions[frames[i]]), rec.positions[frames[i]]),
                        len(frames))
-    kept = per_call_us(lambda i: means.fill(lost[frames[i]], lmap.apply(lost[frames[i]])), len(frames))
+    kept = per_call_us(lambda i: means.fill(lmap.apply(lost[frames[i]]), lost[frames[i]]), len(frames))
     print(f"partial means (Vicon), us per frame: all seen {seen:.1f}, one shoulder marker lost {kept:.1f} "
           "(the map's own gather included)")
 

@@ -20,6 +20,7 @@ from mocap_core.hip_interpolation import WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
+from mocap_core.landmark_fills import fill_take
 from mocap_core.partial_means import PartialMeans
 from mocap_core.presets import PRESETS
 from mocap_core.warmup import ensure_compiled, warm_up
@@ -228,7 +229,7 @@ def run_gaps(args) -> int:
     tracking = pipe.landmark_map.tracking(rec.positions)  # the same for every run
     partial = None
     if args.rebuild:  # (the studio's: a landmark that is the mean of several markers kept while some are seen)
-        partial = PartialMeans(pipe.landmark_map).fill_landmarks(rec.positions, landmarks)
+        partial = fill_take(PartialMeans(pipe.landmark_map).fill, landmarks, markers=rec.positions)
     take = GapTake(landmarks, reference, profile, rec.rate_hz, tracking, pipe.landmark_map.tracking_of, partial)
     hips = HipOptions(when_lost=args.hips_lost, rebuild=args.rebuild, pose_memory=args.pose_memory,
                       pair_guard=args.pair_guard)

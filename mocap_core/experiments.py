@@ -159,7 +159,7 @@ class GapTake:
     """A take as gap_run fills it: its landmarks (F, n_landmarks, 3), the complete take's solve to measure against
     (F, joints, 3), its profile and rate (which paces the fill's blends); the profile's tracking markers (F, n, 3)
     and the segment of each (LandmarkMap.tracking_of), which stay seen; ``partial``: its landmarks kept from some of
-    their markers and their mask (PartialMeans.fill_landmarks of the whole take), which fill those still lost after
+    their markers and their mask (PartialMeans.fill over the whole take), which fill those still lost after
     the rebuild and the pose memory, as in the hip node, but not the hidden ones."""
     landmarks: np.ndarray
     reference: np.ndarray
@@ -188,7 +188,7 @@ def gap_run(take: GapTake, gap: Gap, solver: str = "ccd", constraints: bool = Tr
     """Hide the gap's joints in the take and fill them with the hip stage's ``hips`` (the pelvis when lost; lost
     limb landmarks rebuilt, recalled, a bony pair whose spacing jumped dropped), the solver and the fills; compare
     with the complete take."""
-    from mocap_core.landmark_fills import LandmarkFills
+    from mocap_core.landmark_fills import LandmarkFills, fill_take
     from mocap_core.localization import Localizer
 
     hips, landmarks, rate_hz = hips or HipOptions(), take.landmarks, take.rate_hz
@@ -209,12 +209,13 @@ def gap_run(take: GapTake, gap: Gap, solver: str = "ccd", constraints: bool = Tr
     # the profile's landmarks: those the complete take has somewhere
     present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
     frame_s = 1.0 / rate_hz if rate_hz else float("nan")
-    lm, rebuilt = LandmarkFills(hips.rebuild, hips.pose_memory, take.tracking_of, present,
-                                pair_guard=hips.pair_guard).fill_landmarks(lm, take.tracking, np.arange(len(lm)) * frame_s)
+    landmark_fills = LandmarkFills(hips.rebuild, hips.pose_memory, take.tracking_of, present,
+                                   pair_guard=hips.pair_guard)
+    lm, rebuilt = fill_take(landmark_fills.fill, lm, tracking=take.tracking, time_s=np.arange(len(lm)) * frame_s)
     if take.partial is not None:  # (given whole, not LandmarkFills' own: it would keep the hidden landmarks from markers)
         kept = take.partial[1] & ~hidden_lm & np.isnan(lm).any(axis=2)
         lm[kept] = take.partial[0][kept]
-        rebuilt = kept if rebuilt is None else rebuilt | kept
+        rebuilt |= kept
     loc = Localizer(take.profile.body).localize(lm, rebuilt)
     pos, frames, status = loc.positions, loc.frames, loc.status
     if gap.mode == "joint":

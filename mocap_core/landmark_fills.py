@@ -6,7 +6,7 @@ each fills only what the ones before could not, and never learns from what they 
 """
 from __future__ import annotations
 
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -35,11 +35,13 @@ class LandmarkFills:
         self.partial = PartialMeans(means) if rebuild and means is not None else None
 
     def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None, time_s: float = np.nan,
-             markers: np.ndarray | None = None) -> np.ndarray | None:
-        """One frame, in place; the mask of the landmarks filled, or None when no fill is on. ``time_s``: the
-        frame's time (the pose memory finds poses by the toe's velocity too); ``markers``: the frame's markers
-        as received (the partial means)."""
-        filled = None
+             markers: np.ndarray | None = None) -> np.ndarray:
+        """One frame, in place; the mask of the landmarks filled. ``tracking``: the profile's tracking markers
+        (None: lost); ``time_s``: the frame's time (the pose memory finds poses by the toe's velocity too);
+        ``markers``: the frame's markers as received (the partial means)."""
+        filled = np.zeros(len(landmarks), np.bool_)
+        if tracking is None and self.rebuilder is not None and self.rebuilder.n_tracking:
+            tracking = np.full((self.rebuilder.n_tracking, 3), np.nan)
         if self.guard is not None:  # (lost now: what follows fills them like any other)
             self.guard.fill(landmarks, time_s)
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
@@ -47,33 +49,19 @@ class LandmarkFills:
         if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
             filled |= self.leg_hinge.fill(landmarks, tracking, filled, time_s)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
-            recalled = self.memory.fill(landmarks, filled, tracking, time_s)
-            filled = recalled if filled is None else filled | recalled
+            filled |= self.memory.fill(landmarks, filled if self.rebuilder is not None else None, tracking, time_s)
         if self.partial is not None and markers is not None:  # what is still lost
-            filled |= self.partial.fill(markers, landmarks)
+            filled |= self.partial.fill(landmarks, markers)
         return filled
 
-    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None,
-                       times_s: np.ndarray | None = None, markers: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Frames (F, n_landmarks, 3) -> the filled copy and the (F, n_landmarks) mask (None: no fill on);
-        ``times_s``: the frames' times; ``markers``: the frames' markers (F, n_labels, 3)."""
-        filled = None
-        if self.guard is not None:
-            landmarks = np.array(landmarks, dtype=np.float64, copy=True)
-            self.guard.fill_landmarks(landmarks, times_s)
-        if self.rebuilder is not None:
-            if tracking is None and self.rebuilder.n_tracking:  # none given: the tracking markers are lost
-                tracking = np.full((len(landmarks), self.rebuilder.n_tracking, 3), np.nan)
-            landmarks, filled = self.rebuilder.fill_landmarks(landmarks, tracking, times_s)
-        if self.leg_hinge is not None:
-            for f in range(len(landmarks)):
-                filled[f] |= self.leg_hinge.fill(landmarks[f], tracking[f], filled[f],
-                                                 np.nan if times_s is None else times_s[f])
-        if self.memory is not None:
-            landmarks, recalled = self.memory.fill_landmarks(landmarks, filled, tracking, times_s)
-            filled = recalled if filled is None else filled | recalled
-        if self.partial is not None and markers is not None:
-            landmarks, kept = self.partial.fill_landmarks(markers, landmarks)
-            filled |= kept
-        return landmarks, filled
+
+def fill_take(fill: Callable[..., np.ndarray], landmarks: np.ndarray, **frames) -> tuple[np.ndarray, np.ndarray]:
+    """A one-frame fill run over a take. ``fill(frame, **arguments)`` fills one frame of ``landmarks`` in place and
+    returns the mask of what it filled; each keyword holds an argument's frames (F, ...), None leaving it at the
+    fill's default. -> the filled copy of ``landmarks`` (F, n, 3) and the (F, n) mask."""
+    given = {name: value for name, value in frames.items() if value is not None}
+    out = np.array(landmarks, dtype=np.float64, copy=True)
+    mask = np.zeros(out.shape[:2], bool)
+    for f in range(len(out)):
+        mask[f] = fill(out[f], **{name: value[f] for name, value in given.items()})
+    return out, mask

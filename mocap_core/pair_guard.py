@@ -59,14 +59,6 @@ class PairGuard:
         return [f"{PAIRS[p][0]} and {PAIRS[p][1]} {self.held[p] * 1000:.0f} mm apart where they were "
                 f"{self.spacing[p] * 1000:.0f}" for p in np.flatnonzero(self.began)]
 
-    def fill_landmarks(self, landmarks: np.ndarray, times_s: np.ndarray | None = None) -> np.ndarray:
-        """Frames (F, n_landmarks, 3), in place; returns the (F, n_landmarks) mask of the landmarks dropped."""
-        mask = np.zeros(landmarks.shape[:2], bool)
-        for f in range(len(landmarks)):
-            mask[f] = self.fill(landmarks[f], np.nan if times_s is None else times_s[f])
-        return mask
-
-
 @njit(cache=True)
 def guard_frame(lm, pairs, spacing, dropped, held, held_s, began, dt, mask):
     for p in range(len(pairs)):

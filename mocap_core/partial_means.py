@@ -36,23 +36,14 @@ class PartialMeans:
         self.last_whole = np.full((len(self.means), landmark_map.n_labels, 3), np.nan)
         self.turns = np.tile(np.eye(3), (len(self.means), 1, 1))  # and how its nearest markers turned since
 
-    def fill(self, markers: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
-        """One frame: ``markers`` (n_labels, 3) as received, ``landmarks`` (n_landmarks, 3) from the map and the
-        fills before, its lost ones filled in place; returns the mask of the landmarks filled."""
+    def fill(self, landmarks: np.ndarray, markers: np.ndarray) -> np.ndarray:
+        """One frame: ``landmarks`` (n_landmarks, 3) from the map and the fills before, its lost ones filled in place
+        from ``markers`` (n_labels, 3) as received; returns the mask of the landmarks filled."""
         filled = np.zeros(len(landmarks), bool)
         if len(self.means):
             _fill_means(np.asarray(markers, np.float64), landmarks, self.map.idx, self.count, self.means,
                         self.last_whole, self.turns, filled)
         return filled
-
-    def fill_landmarks(self, markers: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Frames (F, n_labels, 3) and their landmarks (F, n_landmarks, 3) -> the filled copy and its mask."""
-        out = landmarks.copy()
-        filled = np.zeros(out.shape[:2], bool)
-        for f in range(len(out)):
-            filled[f] = self.fill(markers[f], out[f])
-        return out, filled
-
 
 @njit(cache=True)
 def _seen(p):

@@ -18,7 +18,7 @@ from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
-from mocap_core.landmark_fills import LandmarkFills
+from mocap_core.landmark_fills import LandmarkFills, fill_take
 from mocap_core.localization import Localizer
 from mocap_core.marker_gate import MarkerGate
 from mocap_core.profiles import Profile
@@ -71,7 +71,7 @@ class SkeletonPipeline:
         ``markers``: the frames' markers, from which a landmark that is the mean of several, still lost, is kept
         while some of them are seen (mocap_core.partial_means; with the rebuild)."""
         times = (start + np.arange(len(landmarks))) * self.frame_s
-        landmarks, rebuilt = self.fills.fill_landmarks(landmarks, tracking, times, markers)
+        landmarks, rebuilt = fill_take(self.fills.fill, landmarks, tracking=tracking, time_s=times, markers=markers)
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:

@@ -185,19 +185,6 @@ class PoseMemory:
                        self.toe_motion, float(time_s))
         return out
 
-    def fill_landmarks(self, landmarks: np.ndarray, filled: np.ndarray | None = None,
-                       tracking: np.ndarray | None = None, times_s: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
-        """Landmark frames (F, n_landmarks, 3) -> filled copy and the (F, n_landmarks) mask filled here;
-        ``tracking``: the tracking markers of the same frames (F, n_tracking, 3); ``times_s``: their times."""
-        out = np.array(landmarks, dtype=np.float64, copy=True)
-        mask = np.zeros(out.shape[:2], bool)
-        for f in range(out.shape[0]):
-            mask[f] = self.fill(out[f], None if filled is None else filled[f],
-                                None if tracking is None else tracking[f], np.nan if times_s is None else times_s[f])
-        return out, mask
-
-
 @njit(cache=True)
 def pelvis_frame(lm, origin, rot):
     """The pelvis's origin (between the ASIS) and axes (columns: x to the left ASIS, z up from the

@@ -246,18 +246,6 @@ class SegmentRebuilder:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
 
-    def fill_landmarks(self, landmarks: np.ndarray, tracking: np.ndarray | None = None,
-                       times_s: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Landmark frames (F, n_landmarks, 3) and tracking frames (F, n_tracking, 3) -> filled copy of
-        the landmarks and the (F, n_landmarks) rebuilt mask; ``times_s``: the frames' times (None: unknown)."""
-        out = np.array(landmarks, dtype=np.float64, copy=True)
-        mask = np.zeros(out.shape[:2], bool)
-        for f in range(out.shape[0]):
-            mask[f] = self.fill(out[f], None if tracking is None else tracking[f],
-                                np.nan if times_s is None else times_s[f])
-        return out, mask
-
-
 @njit(cache=True)
 def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, lone,
                   reference, distance, last, slid, along, along_since, time_s, rebuilt):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from mocap_core.landmark_fills import LandmarkFills
+from mocap_core.landmark_fills import LandmarkFills, fill_take
 from mocap_core.leg_hinge import COURSE_S, LegHinge
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
@@ -214,7 +214,7 @@ def test_the_vicon_kick_knee_and_ankle_from_the_shank_marker():
         assert fills.leg_hinge is not None
         if not hinge:
             fills.leg_hinge = None
-        out, filled = fills.fill_landmarks(hidden, tracking)
+        out, filled = fill_take(fills.fill, hidden, tracking=tracking)
         pos = Localizer(profile.body).localize(out, filled).positions
         errors[hinge] = {j: np.linalg.norm(pos[120:, INDEX[j]] - reference[120:, INDEX[j]], axis=1)
                          for j in ("knee_r", "ankle_r")}

@@ -3,6 +3,7 @@ import numpy as np
 
 from mocap_core.experiments import Gap, GapTake, gap_run
 from mocap_core.fill_options import STUDIO, HipOptions
+from mocap_core.landmark_fills import fill_take
 from mocap_core.pair_guard import PAIR_STEADY_S, PairGuard
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
@@ -25,8 +26,7 @@ def _wrist(ulnar_offsets_m):
 
 
 def _dropped(lm):
-    out = lm.copy()
-    mask = PairGuard().fill_landmarks(out, np.arange(len(lm)) / RATE_HZ)
+    out, mask = fill_take(PairGuard().fill, lm, time_s=np.arange(len(lm)) / RATE_HZ)
     assert (np.isnan(out[mask]).all() and np.isfinite(out[~mask & np.isfinite(lm).all(axis=2)]).all())
     return mask
 

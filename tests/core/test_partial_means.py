@@ -6,6 +6,7 @@ import numpy as np
 from mocap_core.experiments import _turns_deg
 from mocap_core.geometry import rigid_fit
 from mocap_core.ik.kernels import axis_angle
+from mocap_core.landmark_fills import fill_take
 from mocap_core.partial_means import PartialMeans
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import LANDMARK_INDEX, LandmarkMap, load_profile
@@ -39,7 +40,7 @@ def test_a_lost_member_moves_with_the_markers_nearest_it_known_answer():
         if f > 0:
             seen[1] = np.nan
         landmarks = _shoulder_map().apply(seen)
-        filled = means.fill(seen, landmarks)
+        filled = means.fill(landmarks, seen)
         assert filled[SAE] == (f > 0)
         np.testing.assert_allclose(landmarks[SAE], 0.5 * (markers[0] + markers[1]), atol=1e-9)
 
@@ -49,14 +50,14 @@ def test_the_turn_leans_on_the_markers_nearest_the_lost_one_known_answer():
     inverse square of its distance from the lost member (geometry.rigid_fit). One of them slides 20 mm: the lost
     back marker keeps its offset from the front one turned by that fit, to 1e-9 m."""
     means = PartialMeans(_shoulder_map())
-    means.fill(BODY.copy(), _shoulder_map().apply(BODY))
+    means.fill(_shoulder_map().apply(BODY), BODY.copy())
     turn = axis_angle(np.array([0.0, 0.6, 0.8]), np.radians(40.0))
     moved = BODY @ turn.T + np.array([0.2, 0.1, 0.0])
     moved[5] += [0.02, 0.0, 0.0]  # slid
     seen = moved.copy()
     seen[1] = np.nan
     landmarks = _shoulder_map().apply(seen)
-    means.fill(seen, landmarks)
+    means.fill(landmarks, seen)
     distance = np.linalg.norm(BODY - BODY[1], axis=1)
     nearest = [i for i in np.argsort(distance) if i != 1][:4]
     rot, _ = rigid_fit(BODY[nearest], moved[nearest], 1 / distance[nearest] ** 2)
@@ -81,7 +82,7 @@ def test_with_fewer_than_three_near_markers_seen_the_last_turn_is_kept():
         if f > 15:
             seen[[3, 4, 5]] = np.nan
         landmarks = _shoulder_map().apply(seen)
-        means.fill(seen, landmarks)
+        means.fill(landmarks, seen)
         truth = 0.5 * (markers[0] + markers[1])
         if f > 15:
             kept.append(np.linalg.norm(landmarks[SAE] - truth))
@@ -97,12 +98,12 @@ def test_all_members_lost_or_no_whole_frame_yet_leaves_the_landmark_lost():
     seen = BODY.copy()
     seen[1] = np.nan
     landmarks = _shoulder_map().apply(seen)
-    assert not means.fill(seen, landmarks)[SAE] and np.isnan(landmarks[SAE]).all()  # never whole: nothing to keep
-    means.fill(BODY, _shoulder_map().apply(BODY))
+    assert not means.fill(landmarks, seen)[SAE] and np.isnan(landmarks[SAE]).all()  # never whole: nothing to keep
+    means.fill(_shoulder_map().apply(BODY), BODY)
     seen = BODY.copy()
     seen[[0, 1]] = np.nan
     landmarks = _shoulder_map().apply(seen)
-    assert not means.fill(seen, landmarks)[SAE] and np.isnan(landmarks[SAE]).all()
+    assert not means.fill(landmarks, seen)[SAE] and np.isnan(landmarks[SAE]).all()
 
 
 def test_a_hidden_shoulder_marker_on_a_real_take():
@@ -121,7 +122,7 @@ def test_a_hidden_shoulder_marker_on_a_real_take():
             continue
         window[1:, back] = np.nan
         means = PartialMeans(lmap)
-        kept, _ = means.fill_landmarks(window, lmap.apply(window))
+        kept, _ = fill_take(means.fill, lmap.apply(window), markers=window)
         errors += list(np.linalg.norm(kept[1:, SAE] - truth[start:start + 12], axis=1))
         offset = window[0, back] - window[0, front]
         unturned += list(np.linalg.norm(0.5 * (2 * window[1:, front] + offset) - truth[start:start + 12], axis=1))

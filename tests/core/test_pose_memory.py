@@ -3,6 +3,7 @@ import numpy as np
 
 from mocap_core.experiments import Gap, GapTake, gap_run
 from mocap_core.fill_options import STUDIO, HipOptions
+from mocap_core.landmark_fills import fill_take
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.ik.kernels import rotation_vector, turned_by
 from mocap_core.localization import hip_centres
@@ -64,9 +65,9 @@ def test_a_pose_only_the_other_leg_has_made_is_recalled_mirrored_known_answer():
     left_leg = [LANDMARK_INDEX[n] for n in LEG]
     hidden[600:, left_leg] = np.nan
     both = PRESENT + ["R_FM2", "R_FLE", "R_FAL"]
-    filled, _ = PoseMemory(both).fill_landmarks(hidden)
+    filled, _ = fill_take(PoseMemory(both).fill, hidden)
     err = np.linalg.norm(filled[650:] - lm[650:], axis=2)[:, left_leg]  # (once the first swing is under way)
-    alone, _ = PoseMemory(PRESENT).fill_landmarks(hidden)  # without the right leg's poses
+    alone, _ = fill_take(PoseMemory(PRESENT).fill, hidden)  # without the right leg's poses
     err_alone = np.linalg.norm(alone[650:] - lm[650:], axis=2)[:, left_leg]
     assert err.mean() < 0.01 and err.mean() < 0.2 * err_alone.mean(), (err.mean(), err_alone.mean())
 
@@ -75,7 +76,7 @@ def test_a_repeated_motion_is_recalled_in_the_pelvis_frame_known_answer():
     truth = _swinging_leg(800, 400)
     hidden = truth.copy()
     hidden[500:, [LANDMARK_INDEX[n] for n in LEG]] = np.nan  # the second swing, while the pelvis turns on
-    filled, mask = PoseMemory(PRESENT).fill_landmarks(hidden)
+    filled, mask = fill_take(PoseMemory(PRESENT).fill, hidden)
     assert mask[500:, [LANDMARK_INDEX[n] for n in LEG]].all() and not mask[:500].any()
     err = np.linalg.norm(filled[500:] - truth[500:], axis=2)[:, [LANDMARK_INDEX[n] for n in LEG]]
     step = np.linalg.norm(np.diff(truth[:, LANDMARK_INDEX["L_FAL"]], axis=0), axis=1).max()
@@ -87,12 +88,12 @@ def test_recall_starts_from_the_last_pose_seen_and_waits_for_enough_poses():
     knee = LANDMARK_INDEX["L_FLE"]
     hidden = truth.copy()
     hidden[200:, knee] = np.nan
-    filled, _ = PoseMemory(PRESENT).fill_landmarks(hidden)
+    filled, _ = fill_take(PoseMemory(PRESENT).fill, hidden)
     step = np.linalg.norm(np.diff(truth[:, knee], axis=0), axis=1).max()
     assert np.linalg.norm(filled[200, knee] - filled[199, knee]) < 1.5 * step  # no jump when it goes
     early = truth.copy()
     early[NEIGHBOURS - 5:, knee] = np.nan  # fewer poses seen than are averaged: nothing recalled
-    _, mask = PoseMemory(PRESENT).fill_landmarks(early)
+    _, mask = fill_take(PoseMemory(PRESENT).fill, early)
     assert not mask.any()
 
 
@@ -103,11 +104,11 @@ def test_filled_landmarks_are_not_learned_and_a_seen_heel_is_left_to_segment_car
     filled_before[:, knee] = True  # an earlier stage estimated the knee in every frame
     hidden = truth.copy()
     hidden[300:, knee] = np.nan
-    _, mask = PoseMemory(PRESENT).fill_landmarks(hidden, filled_before)
+    _, mask = fill_take(PoseMemory(PRESENT).fill, hidden, filled=filled_before)
     assert not mask.any()  # it never saw the leg measured, so it recalls nothing
     with_heel = hidden.copy()
     with_heel[:, heel] = with_heel[:, LANDMARK_INDEX["L_FAL"]] + [0.0, -0.05, -0.05]
-    _, mask = PoseMemory(PRESENT + ["L_FCC"]).fill_landmarks(with_heel)
+    _, mask = fill_take(PoseMemory(PRESENT + ["L_FCC"]).fill, with_heel)
     assert not mask.any()
 
 
@@ -209,7 +210,7 @@ def test_dance1s_recalled_ankle_stays_within_the_legs_reach():
     hidden = lm.copy()
     hidden[start:stop, [LANDMARK_INDEX["L_FLE"], ankle]] = np.nan
     memory = PoseMemory(pipe.landmark_map.present(), pipe.landmark_map.tracking_of)
-    filled, mask = memory.fill_landmarks(hidden, None, tracking, np.arange(rec.n_frames) / rec.rate_hz)
+    filled, mask = fill_take(memory.fill, hidden, tracking=tracking, time_s=np.arange(rec.n_frames) / rec.rate_hz)
     assert mask[start:stop, ankle].all()
     hips = [hip_centres(frame)[1:] for frame in lm]
     left = np.array([np.linalg.norm(filled[f, ankle] - hips[f][0]) for f in range(rec.n_frames)])
@@ -229,7 +230,7 @@ def test_one_wrong_ankle_frame_does_not_undo_the_legs_reach():
     glitch[200, ankle] += [1.0, 0.0, 0.0]
     memories = [PoseMemory(PRESENT), PoseMemory(PRESENT)]
     for memory, frames in zip(memories, (truth, glitch)):
-        memory.fill_landmarks(frames)
+        fill_take(memory.fill, frames)
     assert abs(memories[0].reach[0] - farthest) < 1e-9
     assert farthest < memories[1].reach[0] < farthest + 0.01, (memories[1].reach[0], farthest)
 
@@ -263,8 +264,8 @@ def test_the_ankle_turns_with_the_toe_markers_line_known_answer():
     hidden = truth.copy()
     hidden[600:, [LANDMARK_INDEX[n] for n in LEG]] = np.nan
     ankle = LANDMARK_INDEX["L_FAL"]
-    with_line, _ = PoseMemory(PRESENT, FOOT).fill_landmarks(hidden, None, tracking)
-    without, _ = PoseMemory(PRESENT).fill_landmarks(hidden)
+    with_line, _ = fill_take(PoseMemory(PRESENT, FOOT).fill, hidden, tracking=tracking)
+    without, _ = fill_take(PoseMemory(PRESENT).fill, hidden)
     err = np.linalg.norm(with_line[650:, ankle] - truth[650:, ankle], axis=1)  # (once the smoothing has settled)
     err0 = np.linalg.norm(without[650:, ankle] - truth[650:, ankle], axis=1)
     offset = np.linalg.norm(truth[0, ankle] - truth[0, LANDMARK_INDEX["L_FM2"]])
@@ -278,8 +279,8 @@ def test_toe_markers_off_their_spacing_are_not_used_known_answer():
     truth, tracking = _turning_foot(900, 600, np.radians(25), spread=1.3)
     hidden = truth.copy()
     hidden[600:, [LANDMARK_INDEX[n] for n in LEG]] = np.nan
-    with_line, _ = PoseMemory(PRESENT, FOOT).fill_landmarks(hidden, None, tracking)
-    without, _ = PoseMemory(PRESENT).fill_landmarks(hidden)
+    with_line, _ = fill_take(PoseMemory(PRESENT, FOOT).fill, hidden, tracking=tracking)
+    without, _ = fill_take(PoseMemory(PRESENT).fill, hidden)
     np.testing.assert_allclose(with_line[600:], without[600:], atol=1e-9)
 
 
@@ -360,8 +361,8 @@ def test_the_toe_going_forward_and_back_is_told_apart_by_its_velocity_known_answ
     hidden = lm.copy()
     hidden[500:, [LANDMARK_INDEX[n] for n in LEG]] = np.nan
     knee = LANDMARK_INDEX["L_FLE"]
-    timed, _ = PoseMemory(PRESENT).fill_landmarks(hidden, times_s=np.arange(frames) / rate)
-    untimed, _ = PoseMemory(PRESENT).fill_landmarks(hidden)
+    timed, _ = fill_take(PoseMemory(PRESENT).fill, hidden, time_s=np.arange(frames) / rate)
+    untimed, _ = fill_take(PoseMemory(PRESENT).fill, hidden)
     err = np.linalg.norm(timed[550:, knee] - lm[550:, knee], axis=1)  # (once the smoothing has settled)
     err0 = np.linalg.norm(untimed[550:, knee] - lm[550:, knee], axis=1)
     assert err0.mean() > 0.02, err0.mean()  # between the two: 5 cm x |cos| on average, less the toe's share
@@ -380,9 +381,9 @@ def test_walk1_knee_from_the_toes_place_and_velocity():
     hidden = lm.copy()
     hidden[start:, leg] = np.nan
     present = pipe.landmark_map.present()
-    timed, _ = PoseMemory(present, pipe.landmark_map.tracking_of).fill_landmarks(
-        hidden, None, tracking, np.arange(len(lm)) / rec.rate_hz)
-    untimed, _ = PoseMemory(present, pipe.landmark_map.tracking_of).fill_landmarks(hidden, None, tracking)
+    timed, _ = fill_take(PoseMemory(present, pipe.landmark_map.tracking_of).fill, hidden,
+                         tracking=tracking, time_s=np.arange(len(lm)) / rec.rate_hz)
+    untimed, _ = fill_take(PoseMemory(present, pipe.landmark_map.tracking_of).fill, hidden, tracking=tracking)
     seen = np.isfinite(lm[start:, leg[0]]).all(axis=1)
     knee, knee0 = (np.linalg.norm(out[start:, leg[0]] - lm[start:, leg[0]], axis=1)[seen].mean()
                    for out in (timed, untimed))
@@ -400,11 +401,11 @@ def test_times_that_stop_jump_back_or_are_missing_leave_the_recall_by_place():
     times[300:] -= 2.5     # looped back
     times[600:] += 7.0     # a pause of 4.5 s
     times[650:700] = np.nan
-    odd, mask = PoseMemory(PRESENT).fill_landmarks(hidden, times_s=times)
+    odd, mask = fill_take(PoseMemory(PRESENT).fill, hidden, time_s=times)
     assert mask[500:, leg].all() and np.isfinite(odd[500:, leg]).all()
     err = np.linalg.norm(odd[500:, leg] - truth[500:, leg], axis=2)
     step = np.linalg.norm(np.diff(truth[:, LANDMARK_INDEX["L_FAL"]], axis=0), axis=1).max()
     assert err.max() < 3 * step, (err.max(), step)
-    untimed, _ = PoseMemory(PRESENT).fill_landmarks(hidden)
-    same, _ = PoseMemory(PRESENT).fill_landmarks(hidden, times_s=np.zeros(800))  # a source with no clock
+    untimed, _ = fill_take(PoseMemory(PRESENT).fill, hidden)
+    same, _ = fill_take(PoseMemory(PRESENT).fill, hidden, time_s=np.zeros(800))  # a source with no clock
     np.testing.assert_array_equal(same, untimed)

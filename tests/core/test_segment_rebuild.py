@@ -5,6 +5,7 @@ import pytest
 from mocap_core.experiments import Gap, GapTake, gap_run
 from mocap_core.fill_options import STUDIO, HipOptions
 from mocap_core.geometry import rigid_fit
+from mocap_core.landmark_fills import fill_take
 from mocap_core.localization import Localizer
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, load_profile
@@ -398,8 +399,8 @@ def test_sprint_wrist_with_one_styloid_hidden_is_kept_by_the_rebuild():
     start = int(rec.rate_hz)
     hidden = lm.copy()
     hidden[start:, LANDMARK_INDEX["L_USP"]] = np.nan
-    filled, mask = SegmentRebuilder(pipe.landmark_map.tracking_of).fill_landmarks(
-        hidden, pipe.landmark_map.tracking(rec.positions), np.arange(len(lm)) / rec.rate_hz)
+    filled, mask = fill_take(SegmentRebuilder(pipe.landmark_map.tracking_of).fill, hidden,
+                             tracking=pipe.landmark_map.tracking(rec.positions), time_s=np.arange(len(lm)) / rec.rate_hz)
     assert mask[start:, LANDMARK_INDEX["L_USP"]].all()
     loc = Localizer(prof.body).localize(filled, mask)
     error = np.linalg.norm(loc.positions[start:, INDEX["wrist_l"]] - reference[start:], axis=-1)
@@ -545,7 +546,7 @@ def test_joints_from_rebuilt_landmarks_are_estimated_not_located():
     take = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
     lm = load_profile("qualisys_sports").resolve(take.labels).apply(take.positions[:40])
     lm[20:, LANDMARK_INDEX["L_FCC"]] = np.nan
-    filled, rebuilt = SegmentRebuilder().fill_landmarks(lm)
+    filled, rebuilt = fill_take(SegmentRebuilder().fill, lm)
     assert rebuilt[20:, LANDMARK_INDEX["L_FCC"]].all() and not rebuilt[:20].any()
     loc = Localizer().localize(filled, rebuilt)
     assert (loc.status[20:, INDEX["foot_l"]] == Status.ESTIMATED).all()

@@ -5,6 +5,7 @@ import pytest
 import zmq
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame, SkeletonFrame
+from mocap_core.landmark_fills import fill_take
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.pose_memory import PoseMemory
 from mocap_core.profiles import LANDMARK_INDEX, load_profile
@@ -141,7 +142,7 @@ def test_recalled_knee_and_ankle_are_flagged_interpolated():
         raw = take.positions[:frames].copy()
         raw[lost_from:, hidden] = np.nan
         memory = [PoseMemory(pipe.landmark_map.present(), pipe.landmark_map.tracking_of) for _ in range(2)]
-        timed, untimed = (m.fill_landmarks(pipe.landmarks(raw), None, pipe.landmark_map.tracking(raw), times)[0]
+        timed, untimed = (fill_take(m.fill, pipe.landmarks(raw), tracking=pipe.landmark_map.tracking(raw), time_s=times)[0]
                           for m, times in zip(memory, (np.arange(frames) / take.rate_hz, None)))
         knee = LANDMARK_INDEX["L_FLE"]
         node_knee = np.array([m.positions[knee] for m in markers.got[lost_from:]])
