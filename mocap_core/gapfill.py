@@ -37,7 +37,7 @@ from mocap_core.body_model import END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
 from mocap_core.fill_options import FillOptions
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
-from mocap_core.ik.solvers import ChainLimits, KernelSolver, SolverParams, get_solver
+from mocap_core.ik.solvers import ChainLimits, Solver, SolverParams, get_solver
 from mocap_core.ik.solvers_kernels import solve
 from mocap_core.limb_memory import LimbMemory
 from mocap_core.skeleton import ESTIMATED, HELD, INDEX, LIMBS, LOCATED, MISSING, PARENT
@@ -62,7 +62,7 @@ class FillStats:
 class LimbFiller:
     """Fills the gaps of one limb frame after frame. Owns the limb's previous solved chain."""
 
-    def __init__(self, limb: str, solver: KernelSolver | str = "ccd", params: SolverParams | None = None,
+    def __init__(self, limb: str, solver: Solver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, options: FillOptions = FillOptions()):
         """``options``: the fills beyond the thesis (none: the thesis's method)."""
         if limb not in LIMBS:

@@ -7,7 +7,7 @@ so that its end effector reaches ``target``, honouring the chain's limits when a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple, Protocol
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,26 +45,22 @@ class SolveResult:
     residual_m: float
 
 
-class Solver(Protocol):
-    name: str
-
-    def solve(self, P: np.ndarray, R: np.ndarray, target: np.ndarray, limits: ChainLimits,
-              params: SolverParams) -> SolveResult: ...
-
-
 @dataclass(frozen=True)
-class KernelSolver:
-    """A solver by its place in solvers_kernels.SOLVERS, run by the shared driver (solvers_kernels.solve)."""
+class Solver:
+    """A solver: its name and its place in solvers_kernels.SOLVERS. The limb fill's kernel runs it by that place
+    on every run of lost joints (the shared driver, solvers_kernels.solve, calling the module's step); ``solve``
+    runs it on one chain from Python."""
 
     name: str
     kernel_id: int
 
-    def solve(self, P, R, target, limits, params):
+    def solve(self, P: np.ndarray, R: np.ndarray, target: np.ndarray, limits: ChainLimits,
+              params: SolverParams) -> SolveResult:
         it, res = k.solve(self.kernel_id, P, R, np.asarray(target, np.float64), limits, params.typed())
         return SolveResult(int(it), float(res))
 
 
-SOLVERS: dict[str, Solver] = {name: KernelSolver(name, i) for i, name in enumerate(k.NAMES)}
+SOLVERS: dict[str, Solver] = {name: Solver(name, i) for i, name in enumerate(k.NAMES)}
 
 
 class UnknownSolver(Exception):
