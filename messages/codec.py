@@ -8,8 +8,10 @@ compiled from the pydantic models (messages.fastpath) and falls back to pydantic
 from __future__ import annotations
 
 import msgpack
+import numpy as np
 from pydantic import ValidationError
 
+from messages.arrays import to_wire
 from messages.fastpath import fast_decode, fast_encode, header_decoder, peek_header
 from messages.schemas import BY_SCHEMA, Header, Message
 
@@ -95,7 +97,10 @@ def _checked_header(payload: bytes, topic: str, expected: type[Message] | None) 
         raise DecodeError(topic, f"schema {schema} on a topic of {expected.SCHEMA}", "wrong_schema")
     version = data["header"].get("version")
     if version != cls.VERSION:
-        raise DecodeError(topic, f"{schema} version {version!r}, this build reads {cls.VERSION}", "version")
+        upgrade = UPGRADES.get((schema, version)) if type(version) is int else None
+        if upgrade is None:
+            raise DecodeError(topic, f"{schema} version {version!r}, this build reads {cls.VERSION}", "version")
+        data = upgrade(data)
     try:
         header = Header.model_validate(data["header"])
     except ValidationError as e:
@@ -103,6 +108,26 @@ def _checked_header(payload: bytes, topic: str, expected: type[Message] | None) 
         where = ".".join(str(p) for p in first["loc"])
         raise DecodeError(topic, f"{schema}.header.{where}: {first['msg']}", "invalid") from None
     return cls, data, header
+
+
+def _quaternions_to_rotations(data: dict) -> dict:
+    """A version-1 skeleton or limb message, whose bone frames were quaternions (x, y, z, w) in ``orientations``,
+    as version 2 (rotation matrices in ``rotations``). What is malformed is left for validation to name."""
+    from mocap_core.ik.kernels import quats_to_frames
+
+    wire = data.pop("orientations", None)
+    try:
+        quats = np.frombuffer(wire["data"], "<f4").reshape(wire["shape"]).astype(np.float64)
+    except (KeyError, TypeError, ValueError):
+        quats = None
+    if quats is not None and quats.ndim == 2 and quats.shape[1] == 4:
+        data["rotations"] = to_wire(quats_to_frames(quats).astype(np.float32))
+    data["header"] = {**data["header"], "version": data["header"]["version"] + 1}
+    return data
+
+
+# Older versions this build still reads (recorded bags), each turned into the next: (schema, version) -> upgrade.
+UPGRADES = {("mocap.SkeletonFrame", 1): _quaternions_to_rotations, ("mocap.LimbSolution", 1): _quaternions_to_rotations}
 
 
 def json_schemas() -> dict[str, dict]:

@@ -4,8 +4,10 @@ Conventions shared by all messages:
 - positions are float32 metres in the world frame of the source, right-handed; the header's
   ``up_axis`` says which axis is up, set by the source and carried along (mocap_core.world);
   occluded markers and missing joints are NaN;
-- quaternions are float32 in scalar-last order ``(x, y, z, w)`` (scipy, Unity and the thesis code
-  use the same order);
+- a joint's bone frame is a float32 rotation matrix, world from bone: its columns are the bone's x, y and z
+  axes in the world (the layout mocap_core solves in, so no stage converts it); NaN where the joint has none;
+- quaternions, where a consumer wants them (the rig's rotations, RigPose), are float32 in scalar-last order
+  ``(x, y, z, w)`` (scipy, Unity and the thesis code use the same order);
 - every message starts with a :class:`Header`. ``schema``/``version`` identify the model,
   ``seq`` counts messages per publisher and topic (a gap is a drop), ``frame`` and
   ``capture_time_s`` come from the capture system, and ``entry_time_ns`` (wall clock,
@@ -16,7 +18,6 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap_core.skeleton import N_JOINTS
@@ -91,25 +92,27 @@ FLAG_MEASURED, FLAG_INTERPOLATED, FLAG_MISSING = 0, 1, 2
 
 
 class SkeletonFrame(Message):
-    """Every joint of the skeleton model in model order (mocap_core.skeleton.JOINTS).
-
-    ``status`` per joint uses mocap_core.skeleton.Status (0 missing, 1 located, 2 estimated, 3 held).
-    """
+    """Every joint of the skeleton model in model order (mocap_core.skeleton.JOINTS): its position, its bone
+    frame (``rotations``, world from bone) and its ``status`` (mocap_core.skeleton.Status: 0 missing, 1 located,
+    2 estimated, 3 held). Version 1 carried quaternions (``orientations``); the codec still reads it."""
 
     SCHEMA: ClassVar[str] = "mocap.SkeletonFrame"
+    VERSION: ClassVar[int] = 2
     positions: Array("float32", (N_JOINTS, 3))
-    orientations: Array("float32", (N_JOINTS, 4))
+    rotations: Array("float32", (N_JOINTS, 3, 3))
     status: Array("uint8", (N_JOINTS,))
 
 
 class LimbSolution(Message):
-    """The joints of one limb after IK gap filling (``skeleton/limb/<limb>``)."""
+    """The joints of one limb after IK gap filling (``skeleton/limb/<limb>``), laid out as in SkeletonFrame.
+    Version 1 carried quaternions (``orientations``); the codec still reads it."""
 
     SCHEMA: ClassVar[str] = "mocap.LimbSolution"
+    VERSION: ClassVar[int] = 2
     limb: str
     joints: list[str]
     positions: Array("float32", (None, 3))
-    orientations: Array("float32", (None, 4))
+    rotations: Array("float32", (None, 3, 3))
     status: Array("uint8", (None,))
     solver: str = ""
     iterations: int = 0
@@ -119,8 +122,8 @@ class LimbSolution(Message):
     @model_validator(mode="after")
     def _check_lengths(self):
         n = len(self.joints)
-        if not (self.positions.shape[0] == self.orientations.shape[0] == self.status.shape[0] == n):
-            raise ValueError(f"{n} joints but arrays {self.positions.shape}, {self.orientations.shape}, "
+        if not (self.positions.shape[0] == self.rotations.shape[0] == self.status.shape[0] == n):
+            raise ValueError(f"{n} joints but arrays {self.positions.shape}, {self.rotations.shape}, "
                              f"{self.status.shape}")
         return self
 
@@ -177,9 +180,3 @@ class Heartbeat(Message):
 ALL_MESSAGES: tuple[type[Message], ...] = (MarkerSet, MarkerFrame, SkeletonFrame, LimbSolution, RigPose, Heartbeat)
 BY_SCHEMA: dict[str, type[Message]] = {m.SCHEMA: m for m in ALL_MESSAGES}
 
-
-def empty_skeleton_arrays() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    pos = np.full((N_JOINTS, 3), np.nan, np.float32)
-    ori = np.zeros((N_JOINTS, 4), np.float32)
-    status = np.zeros(N_JOINTS, np.uint8)
-    return pos, ori, status

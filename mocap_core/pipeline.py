@@ -15,7 +15,6 @@ from mocap_core.blend import DEFAULT_FRAME_S
 from mocap_core.gapfill import GapFiller
 from mocap_core.presets import PRESETS, Options
 from mocap_core.hip_interpolation import HipInterpolator
-from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
 from mocap_core.landmark_fills import LandmarkFills, fill_take
@@ -30,10 +29,6 @@ class SolvedChunk:
     positions: np.ndarray      # (F, J, 3)
     frames: np.ndarray         # (F, J, 3, 3)
     status: np.ndarray         # (F, J)
-
-    def quaternions(self) -> np.ndarray:
-        f = np.ascontiguousarray(self.frames, np.float64)
-        return frames_to_quats(f.reshape(-1, 3, 3)).reshape(f.shape[:-2] + (4,))
 
 
 class SkeletonPipeline:

@@ -35,7 +35,7 @@ PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "so
 # One limb-fill kernel serves every solver and option (the solver and the fills are its arguments): these
 # parts compile it once, in one process, or two processes would compile the same kernel at the same time.
 FILL_PARTS = ("beyond", "solvers")
-FIT_PARTS = ("fit", "localization", "rotations")  # the fit localizes the frames that calibrate it
+FIT_PARTS = ("fit", "localization")  # the fit localizes the frames that calibrate it
 
 
 def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = True) -> None:
@@ -69,7 +69,7 @@ def pipeline_parts(preset: str, fill_gaps: bool = True) -> tuple[str, ...]:
     from mocap_core.presets import PRESETS
 
     fills = hip_parts(PRESETS[preset].hips) + fill_parts(PRESETS[preset].ik) if fill_gaps else ()
-    return ("localization", "rotations") + fills
+    return ("localization",) + fills
 
 
 def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
@@ -155,7 +155,7 @@ def _warm_localization() -> None:
     Localizer().localize(np.full((1, len(LANDMARKS), 3), np.nan))
 
 
-def _warm_rotations() -> None:  # frames <-> quaternions, as the skeleton messages carry them
+def _warm_rotations() -> None:  # frames <-> quaternions, as the rig's pose carries them
     from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
     from mocap_core.skeleton import N_JOINTS
 

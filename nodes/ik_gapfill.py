@@ -14,7 +14,6 @@ from pydantic import ConfigDict, Field, model_validator
 from messages import LimbSolution, SkeletonFrame
 from mocap_core.fill_options import MIRROR_FILLS, FillOptions
 from mocap_core.gapfill import LimbFiller
-from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.skeleton import LIMBS
@@ -65,7 +64,7 @@ class IkGapfill(Node):
 
     @classmethod
     def kernels(cls, params):
-        return fill_parts(params) + ("rotations",)
+        return fill_parts(params)
 
     def setup(self) -> None:
         p = self.params
@@ -82,6 +81,6 @@ class IkGapfill(Node):
         idx = self.filler.joints
         self.ctx.publish(f"skeleton/limb/{self.params.limb}", LimbSolution(
             header=LimbSolution.make_header(), limb=self.params.limb, joints=self.names,
-            positions=pos[idx].astype(np.float32), orientations=frames_to_quats(frames[idx]).astype(np.float32),
+            positions=pos[idx].astype(np.float32), rotations=frames[idx].astype(np.float32),
             status=status[idx], solver=self.params.solver, iterations=stats.iterations,
             residual_m=stats.residual_m, solve_time_us=stats.solve_time_us), source=msg)

@@ -27,7 +27,7 @@ class JointLocalization(Node):
 
     @classmethod
     def kernels(cls, params):
-        return ("localization", "rotations")
+        return ("localization",)
 
     def setup(self) -> None:
         if self.params.profile == AUTO:  # hip_interpolation chose it and stamped its up axis

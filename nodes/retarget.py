@@ -11,7 +11,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import LimbSolution, RigPose, SkeletonFrame
-from mocap_core.ik.kernels import frames_to_quats, quats_to_frames
+from mocap_core.ik.kernels import frames_to_quats
 from mocap_core.limb_join import LIMBS, FrameJoiner, Joined
 from mocap_core.rig import BONE_JOINT, BONES, default_rig_offsets, local_positions, rig_local_rotations, \
     rig_world_rotations, to_unity_position
@@ -62,7 +62,7 @@ class Retarget(Node):
             joined = self.joiner.add_torso(msg.header.frame, now, *from_message(msg), msg)
         else:
             joined = self.joiner.add_limb(msg.header.frame, now, msg.limb, msg.positions.astype(float),
-                                          quats_to_frames(msg.orientations.astype(float)), msg.status.copy())
+                                          msg.rotations.astype(float), msg.status.copy())
         self._publish(joined)
 
     def on_timer(self) -> None:

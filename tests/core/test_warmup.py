@@ -52,7 +52,7 @@ def test_the_launcher_compiles_the_kernels_its_graph_runs_up_front(tmp_path):
     first = run()
     assert first.returncode == 0, first.stderr
     assert "compiling the numba kernels" in first.stderr and "compiled and cached in" in first.stderr
-    assert stamp.read_text().splitlines() == [warmup.fingerprint(), "localization", "rotations"]
+    assert stamp.read_text().splitlines() == [warmup.fingerprint(), "localization"]
     second = run()
     assert second.returncode == 0 and "compiling the numba kernels" not in second.stderr
 
@@ -61,7 +61,7 @@ def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
     from nodes.registry import load_kind
 
     gapfill = load_kind("ik_gapfill")
-    assert gapfill.kernels(gapfill.Params(limb="left_arm", solver="fabrik")) == ("solvers", "rotations")
+    assert gapfill.kernels(gapfill.Params(limb="left_arm", solver="fabrik")) == ("solvers",)
     assert gapfill.kernels(gapfill.Params(limb="left_arm", preset="studio"))[0] == "beyond"
     hips = load_kind("hip_interpolation")
     assert hips.kernels(hips.Params()) == ()
@@ -70,10 +70,10 @@ def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
         cls = load_kind(kind)
         params = cls.Params(limb="torso") if kind == "ik_gapfill" else cls.Params()
         assert set(cls.kernels(params)) <= set(warmup.PARTS), kind
-    assert warmup.pipeline_parts("thesis") == ("localization", "rotations", "solvers")
-    assert set(warmup.pipeline_parts("studio")) == {"localization", "rotations", "rebuild", "pose_memory",
+    assert warmup.pipeline_parts("thesis") == ("localization", "solvers")
+    assert set(warmup.pipeline_parts("studio")) == {"localization", "rebuild", "pose_memory",
                                                           "pair_guard", "beyond", "blend"}
-    assert warmup.pipeline_parts("studio", fill_gaps=False) == ("localization", "rotations")
+    assert warmup.pipeline_parts("studio", fill_gaps=False) == ("localization",)
 
 
 def test_a_change_of_kernel_sources_drops_every_cached_kernel(tmp_path, monkeypatch):

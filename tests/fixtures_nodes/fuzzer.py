@@ -25,7 +25,7 @@ class Fuzzer(Node):
         self.rng = np.random.default_rng(7)
         self.i = 0
         sk = SkeletonFrame(header=SkeletonFrame.make_header(10**9), positions=np.full((N_JOINTS, 3), np.nan, np.float32),
-                           orientations=np.zeros((N_JOINTS, 4), np.float32), status=np.zeros(N_JOINTS, np.uint8))
+                           rotations=np.zeros((N_JOINTS, 3, 3), np.float32), status=np.zeros(N_JOINTS, np.uint8))
         mf = MarkerFrame(header=MarkerFrame.make_header(10**9), labels=["nobody", "knows"],
                          positions=np.full((2, 3), np.nan, np.float32), flags=np.zeros(2, np.uint8))
         hb = Heartbeat(header=Heartbeat.make_header(), node="x", kind="y", pid=1, state="running", uptime_s=0)

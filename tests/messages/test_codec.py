@@ -23,13 +23,14 @@ def marker_frame(n=35, frame=7):
 def samples():
     pos = np.arange(N_JOINTS * 3, dtype=np.float32).reshape(N_JOINTS, 3)
     ori = np.tile(np.float32([0, 0, 0, 1]), (N_JOINTS, 1))
+    rot = np.tile(np.eye(3, dtype=np.float32), (N_JOINTS, 1, 1))
     return [
         MarkerSet(header=MarkerSet.make_header(), labels=["A", "B"], rate_hz=300, source="test"),
         marker_frame(),
-        SkeletonFrame(header=SkeletonFrame.make_header(3), positions=pos, orientations=ori,
+        SkeletonFrame(header=SkeletonFrame.make_header(3), positions=pos, rotations=rot,
                       status=np.ones(N_JOINTS, np.uint8)),
         LimbSolution(header=LimbSolution.make_header(3), limb="left_arm", joints=["elbow_l", "wrist_l"],
-                     positions=pos[:2], orientations=ori[:2], status=np.uint8([1, 2]), solver="ccd",
+                     positions=pos[:2], rotations=rot[:2], status=np.uint8([1, 2]), solver="ccd",
                      iterations=4, residual_m=0.001, solve_time_us=12.5),
         RigPose(header=RigPose.make_header(3), rig="unity", bones=["Hips"], root_position=np.float32([0, 1, 0]),
                 rotations=ori[:1], positions=pos[:1], held=np.zeros(1, np.uint8)),
@@ -113,6 +114,26 @@ def test_rejects_version_mismatch():
     raw["header"]["version"] = 99
     with pytest.raises(DecodeError, match="version 99"):
         decode(msgpack.packb(raw), "t", MarkerFrame)
+
+
+def test_reads_version_1_skeletons_with_their_quaternions_as_rotations():
+    # bags recorded before version 2 carried each bone frame as a quaternion (x, y, z, w) in "orientations"
+    from scipy.spatial.transform import Rotation
+
+    turns = Rotation.random(N_JOINTS, random_state=3)
+    for msg, n in ((samples()[2], N_JOINTS), (samples()[3], 2)):
+        raw = _raw(msg)
+        raw["header"]["version"] = 1
+        del raw["rotations"]
+        quats = turns.as_quat()[:n].astype("<f4")
+        raw["orientations"] = {"dtype": "<f4", "shape": [n, 4], "data": quats.tobytes()}
+        got = decode(msgpack.packb(raw), "t", type(msg))
+        assert got.header.version == type(msg).VERSION == 2
+        np.testing.assert_allclose(got.rotations, turns.as_matrix()[:n], atol=1e-6)
+        assert decode_header(msgpack.packb(raw), "t", type(msg)).version == 2  # what forwards bytes takes it too
+    raw["orientations"]["shape"] = [3, 4]  # malformed: validation names what is missing
+    with pytest.raises(DecodeError, match="rotations"):
+        decode(msgpack.packb(raw), "t", LimbSolution)
 
 
 def test_rejects_unknown_schema_and_foreign_maps():

@@ -192,7 +192,7 @@ def test_export_foxglove_puts_the_solved_joints_in_its_3d_scene(tmp_path):
     writer = BagWriter(bag)
     for f in range(100):
         msg = SkeletonFrame(header=SkeletonFrame.make_header(int(frames[f]), f / 120, t0 + f * 8_333_333, "+y"),
-                            positions=positions[f].astype(np.float32), orientations=np.zeros((27, 4), np.float32),
+                            positions=positions[f].astype(np.float32), rotations=np.tile(np.eye(3, dtype=np.float32), (27, 1, 1)),
                             status=status[f].astype(np.uint8))
         writer.write("skeleton/solved", encode(msg), t0 + f * 8_333_333 + 500_000)
     writer.close()
