@@ -179,4 +179,3 @@ class Heartbeat(Message):
 
 ALL_MESSAGES: tuple[type[Message], ...] = (MarkerSet, MarkerFrame, SkeletonFrame, LimbSolution, RigPose, Heartbeat)
 BY_SCHEMA: dict[str, type[Message]] = {m.SCHEMA: m for m in ALL_MESSAGES}
-

@@ -18,9 +18,9 @@ from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, Gap, GapTake,
 from mocap_core.fill_options import HELP as FILL_HELP, STUDIO, FillOptions, HipOptions
 from mocap_core.hip_interpolation import WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
+from mocap_core.landmark_fills import fill_take
 from mocap_core.profiles import load_profile
 from mocap_core.recordings import read_recording
-from mocap_core.landmark_fills import fill_take
 from mocap_core.partial_means import PartialMeans
 from mocap_core.presets import PRESETS
 from mocap_core.warmup import ensure_compiled, warm_up

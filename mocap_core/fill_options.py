@@ -67,13 +67,18 @@ class FillOptions(_StageOptions):
                              f"{' and '.join(idle)} false")
         return self
 
+    @staticmethod
+    def idle_on(limb: str) -> tuple[str, ...]:
+        """The fills that do nothing on ``limb``: on the torso, those that learn from a mirrored limb."""
+        return MIRROR_FILLS if limb == "torso" else ()
+
     def for_limb(self, limb: str) -> "FillOptions":
-        """These options as they act on ``limb``: the torso's without the fills that learn from a mirrored limb."""
-        return self.model_copy(update=dict.fromkeys(MIRROR_FILLS, False)) if limb == "torso" else self
+        """These options as they act on ``limb``: without the fills idle there."""
+        return self.model_copy(update=dict.fromkeys(self.idle_on(limb), False))
 
     def refuse_idle(self, limb: str) -> None:
         """A ValueError, saying what to do, when a fill is asked for on a limb where it does nothing."""
-        idle = [name for name in MIRROR_FILLS if getattr(self, name)] if limb == "torso" else []
+        idle = [name for name in self.idle_on(limb) if getattr(self, name)]
         if idle:
             names = " and ".join(idle)
             raise ValueError(f"{names} learn{'s' if len(idle) == 1 else ''} from the mirrored limb, which the torso "

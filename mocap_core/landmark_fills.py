@@ -39,17 +39,18 @@ class LandmarkFills:
         """One frame, in place; the mask of the landmarks filled. ``tracking``: the profile's tracking markers
         (None: lost); ``time_s``: the frame's time (the pose memory finds poses by the toe's velocity too);
         ``markers``: the frame's markers as received (the partial means)."""
-        filled = np.zeros(len(landmarks), np.bool_)
         if tracking is None and self.rebuilder is not None and self.rebuilder.n_tracking:
             tracking = np.full((self.rebuilder.n_tracking, 3), np.nan)
         if self.guard is not None:  # (lost now: what follows fills them like any other)
             self.guard.fill(landmarks, time_s)
         if self.rebuilder is not None:  # lost forearm, foot and shank landmarks from their segment
             filled = self.rebuilder.fill(landmarks, tracking, time_s)
+        else:
+            filled = np.zeros(len(landmarks), np.bool_)
         if self.leg_hinge is not None:  # lost knees and ankles from the hip and a shank marker
             filled |= self.leg_hinge.fill(landmarks, tracking, filled, time_s)
         if self.memory is not None:  # lost knees and ankles where the take's earlier poses had them
-            filled |= self.memory.fill(landmarks, filled if self.rebuilder is not None else None, tracking, time_s)
+            filled |= self.memory.fill(landmarks, filled, tracking, time_s)
         if self.partial is not None and markers is not None:  # what is still lost
             filled |= self.partial.fill(landmarks, markers)
         return filled

@@ -59,6 +59,7 @@ class PairGuard:
         return [f"{PAIRS[p][0]} and {PAIRS[p][1]} {self.held[p] * 1000:.0f} mm apart where they were "
                 f"{self.spacing[p] * 1000:.0f}" for p in np.flatnonzero(self.began)]
 
+
 @njit(cache=True)
 def guard_frame(lm, pairs, spacing, dropped, held, held_s, began, dt, mask):
     for p in range(len(pairs)):

@@ -45,6 +45,7 @@ class PartialMeans:
                         self.last_whole, self.turns, filled)
         return filled
 
+
 @njit(cache=True)
 def _seen(p):
     return np.isfinite(p[0]) and np.isfinite(p[1]) and np.isfinite(p[2])

@@ -185,6 +185,7 @@ class PoseMemory:
                        self.toe_motion, float(time_s))
         return out
 
+
 @njit(cache=True)
 def pelvis_frame(lm, origin, rot):
     """The pelvis's origin (between the ASIS) and axes (columns: x to the left ASIS, z up from the

@@ -246,6 +246,7 @@ class SegmentRebuilder:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
 
+
 @njit(cache=True)
 def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, lone,
                   reference, distance, last, slid, along, along_since, time_s, rebuilt):

@@ -85,7 +85,7 @@ def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
 
 def _warm(part: str) -> None:
     """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
-    pair guard, the fit, the rotation conversions of the messages, the blend at a gap's ends, a solve on a chain
+    pair guard, the fit, the rotation conversions of the rig's pose, the blend at a gap's ends, a solve on a chain
     with a missing middle joint by every solver ("solvers"), or by CCD with the analytic fills of the studio
     options ("beyond")."""
     {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,

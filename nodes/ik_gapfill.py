@@ -12,7 +12,7 @@ import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
 from messages import LimbSolution, SkeletonFrame
-from mocap_core.fill_options import MIRROR_FILLS, FillOptions
+from mocap_core.fill_options import FillOptions
 from mocap_core.gapfill import LimbFiller
 from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
@@ -37,8 +37,8 @@ class Params(FillOptions):
     @model_validator(mode="before")
     @classmethod
     def _preset(cls, values):
-        torso = isinstance(values, dict) and values.get("limb") == "torso"
-        return with_preset("ik", values, leave=MIRROR_FILLS if torso else ())
+        limb = values.get("limb") if isinstance(values, dict) else None
+        return with_preset("ik", values, leave=FillOptions.idle_on(limb))
 
     @model_validator(mode="after")
     def _acts_on_the_limb(self):

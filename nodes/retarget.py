@@ -61,8 +61,7 @@ class Retarget(Node):
         if isinstance(msg, SkeletonFrame):
             joined = self.joiner.add_torso(msg.header.frame, now, *from_message(msg), msg)
         else:
-            joined = self.joiner.add_limb(msg.header.frame, now, msg.limb, msg.positions.astype(float),
-                                          msg.rotations.astype(float), msg.status.copy())
+            joined = self.joiner.add_limb(msg.header.frame, now, msg.limb, *from_message(msg))
         self._publish(joined)
 
     def on_timer(self) -> None:

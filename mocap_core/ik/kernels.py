@@ -396,7 +396,6 @@ def escape_rotation(P, R, ref0, attempt, step_deg, max_deg):
     return True
 
 
-# -- quaternion conversions for the wire (x, y, z, w), per joint ---------------------------------------------
 @njit(cache=True)
 def jacobian(P, n):
     """Positional Jacobian of the end effector for rotations about world x, y, z at every joint."""
@@ -421,6 +420,7 @@ def apply_angles(P, R, dtheta):
             rotate_subchain(P, R, i, axis_angle(w / angle, angle))
 
 
+# -- quaternion conversions (x, y, z, w), per joint -----------------------------------------------------------
 @njit(cache=True)
 def frames_to_quats(frames):
     """(J, 3, 3) rotation matrices -> (J, 4) unit quaternions (x, y, z, w), w >= 0; NaN stays NaN."""
