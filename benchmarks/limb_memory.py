@@ -20,6 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from karate_elbow import karate_elbow_lost  # noqa: E402
 from mocap_core.fill_options import FillOptions  # noqa: E402
 from mocap_core.gapfill import LimbFiller  # noqa: E402
+from mocap_core.limb_memory import LimbMemory  # noqa: E402
 
 
 def main() -> None:
@@ -34,7 +35,7 @@ def main() -> None:
             filler.fill(pos[f], frames[f], status[f])
             took[f] = (time.perf_counter() - t) * 1e6
         gap = took[start:]
-        kept = "" if not memory else f", poses remembered (own, mirrored): {tuple(filler.memory.state[2, :, 0])}"
+        kept = "" if not memory else f", poses remembered (own, mirrored): {tuple(filler.get(LimbMemory).state[2, :, 0])}"
         print(f"left arm, elbow lost from 20 s, limb memory {'on ' if memory else 'off'}: per frame in the gap "
               f"median {np.median(gap):.0f} us, p99 {np.percentile(gap, 99):.0f} us, max {gap.max():.0f} us; "
               f"before the gap median {np.median(took[:start]):.0f} us{kept}")

@@ -15,7 +15,8 @@ from mocap_cli.measure import LAYOUTS
 from mocap_core.experiments import (PACE_WINDOW, THESIS_TIMING_MS, Gap, GapTake, blend_lag, gap_run, gap_windows,
                                     localize_take, measured_joints, real_gap_moves, transition_moves,
                                     worst_case_timing)
-from mocap_core.fill_options import HELP as FILL_HELP, STUDIO, FillOptions, HipOptions
+from mocap_cli.option_flags import add_option_flags, flags_text, options_of
+from mocap_core.fill_options import STUDIO, FillOptions, HipOptions
 from mocap_core.hip_interpolation import WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.landmark_fills import fill_take
@@ -67,23 +68,10 @@ def add_parser(sub) -> None:
     g.add_argument("--report", default="reports/gaps",
                    help="directory for gaps.md, gaps.csv, transitions.csv (moves at loss and return) and the plots")
     g.add_argument("--no-plots", action="store_true")
-    g.add_argument("--swivel", action="store_true", help=FILL_HELP["swivel"])
-    g.add_argument("--segment-carry", action="store_true", help=FILL_HELP["segment_carry"])
-    g.add_argument("--limb-memory", action="store_true", help=FILL_HELP["limb_memory"])
-    g.add_argument("--body-model", action="store_true", help=FILL_HELP["body_model"])
-    g.add_argument("--end-model", action="store_true", help=FILL_HELP["end_model"])
-    g.add_argument("--rebuild", action="store_true", help=FILL_HELP["rebuild"])
-    g.add_argument("--pose-memory", action="store_true", help=FILL_HELP["pose_memory"])
-    g.add_argument("--pair-guard", action="store_true", help=FILL_HELP["pair_guard"])
-    g.add_argument("--hips-lost", choices=list(get_args(WhenLost)), default="hold",
-                   help=f"(with --remove pelvis) {FILL_HELP['when_lost']}")
-    g.add_argument("--reacquire-step", type=float, default=0.0, metavar="M",
-                   help=FILL_HELP["reacquire_step_m"])
-    g.add_argument("--blend-half-life", type=float, default=0.0, metavar="S",
-                   help=FILL_HELP["blend_half_life_s"])
-    g.add_argument("--no-blend-course", dest="blend_course", action="store_false",
-                   help="the blend's spring alone (blend_course false); by default, "
-                        + FILL_HELP["blend_course"])
+    g.add_argument("--hips-lost", dest="when_lost", choices=list(get_args(WhenLost)), default="hold",
+                   help=f"(with --remove pelvis) {HipOptions.model_fields['when_lost'].description}")
+    for model in (HipOptions, FillOptions):
+        add_option_flags(g, model, skip=("when_lost",))
     g.add_argument("--gap-length", type=float, metavar="S",
                    help="short gaps instead of one: hide the joints for S seconds at a time, one gap every "
                         "--gap-every seconds from --from to --to (a studio's occlusions are mostly short)")
@@ -214,10 +202,7 @@ def run_gaps(args) -> int:
             raise SystemExit(f"--gap-length {args.gap_length} / --gap-every {args.gap_every} at "
                              f"{rec.rate_hz:g} Hz: {e}") from None
     try:
-        options = FillOptions(reacquire_step_m=args.reacquire_step, swivel=args.swivel,
-                              segment_carry=args.segment_carry, limb_memory=args.limb_memory,
-                              body_model=args.body_model, end_model=args.end_model,
-                              blend_half_life_s=args.blend_half_life, blend_course=args.blend_course)
+        options, hips = options_of(FillOptions, args), options_of(HipOptions, args)
     except ValueError as e:
         raise SystemExit(f"mocap eval gaps: {e.errors()[0]['msg'].removeprefix('Value error, ')}") from None
     solvers = list(SOLVERS) if args.solvers == "all" else args.solvers.split(",")
@@ -231,8 +216,6 @@ def run_gaps(args) -> int:
     if args.rebuild:  # (the studio's: a landmark that is the mean of several markers kept while some are seen)
         partial = fill_take(PartialMeans(pipe.landmark_map).fill, landmarks, markers=rec.positions)
     take = GapTake(landmarks, reference, profile, rec.rate_hz, tracking, pipe.landmark_map.tracking_of, partial)
-    hips = HipOptions(when_lost=args.hips_lost, rebuild=args.rebuild, pose_memory=args.pose_memory,
-                      pair_guard=args.pair_guard)
     combos = [(m, c, s) for m in modes for c in cons for s in solvers]
     for mode, constrained, solver in tqdm(combos, desc="gap runs", unit="run"):
         runs.append(gap_run(take, Gap(joints, start, stop, mode, short_gaps), solver, constrained, hips, options))
@@ -378,19 +361,9 @@ def run_real_gaps(args) -> int:
 
 
 def options_text(args) -> str:
-    on = [name for name, flag in (("--swivel", args.swivel), ("--segment-carry", args.segment_carry),
-                                  ("--limb-memory", args.limb_memory),
-                                  ("--body-model", args.body_model), ("--end-model", args.end_model),
-                                  ("--rebuild", args.rebuild), ("--pose-memory", args.pose_memory),
-                                  ("--pair-guard", args.pair_guard)) if flag]
-    if args.reacquire_step:
-        on.append(f"--reacquire-step {args.reacquire_step}")
-    if args.blend_half_life:
-        on.append(f"--blend-half-life {args.blend_half_life}")
-        if not args.blend_course:
-            on.append("--no-blend-course")
-    if args.hips_lost != "hold":
-        on.append(f"--hips-lost {args.hips_lost}")
+    on = flags_text((HipOptions, FillOptions), args, skip=("when_lost",))
+    if args.when_lost != "hold":
+        on.append(f"--hips-lost {args.when_lost}")
     return " ".join(on) or "none beyond the thesis"
 
 

@@ -32,11 +32,22 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from pydantic import BaseModel, Field
 
-from mocap_core.frame_clock import next_frame_s
 from mocap_core.analytic_fill import all_finite, nearest_on_circle, nearest_on_sphere
-from mocap_core.skeleton import ESTIMATED, HELD, LOCATED, MISSING
+from mocap_core.fill_units import LimbFill, LimbFrame
+from mocap_core.frame_clock import next_frame_s
 from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vnorm
+from mocap_core.skeleton import ESTIMATED, HELD, LOCATED, MISSING
+
+REACQUIRE_HELP = ("beyond the thesis: close the gap to returning markers by at most this many metres a frame (0 = the "
+                  "thesis's method: jump)")
+BLEND_HELP = ("beyond the thesis: when a joint's markers are lost or come back, go on where the joint was heading and "
+              "let the offset to the new source die out as a critically damped spring that halves it in this many "
+              "seconds (0 = off: a jump at loss)")
+BLEND_COURSE_HELP = ("with blend_half_life_s: after a loss, stay on the markers' course and leave it for the fill only "
+                     "as it grows less trustworthy than the fill has been where the markers came back (learned per "
+                     "joint; false: the spring alone)")
 
 # A critically damped spring from rest, offset o0, is o0 (1 + w t) e^(-w t): it is halved at t = BLEND_X / w.
 BLEND_X = 1.6783469900166612
@@ -160,6 +171,28 @@ class BlendState:
             blend_frames(frames, status, idx, m.last_status, m.has_last, self.last_frame, self.turn_axis, self.turn,
                          self.omega, self.frame_s)
         blend_transitions(positions, status, idx, *m, self.step, self.omega, self.frame_s, self.course_on)
+
+
+class Blend(LimbFill):
+    """The blend as the IK stage's fill, last: the limb's output met without a twitch where a source changed."""
+
+    class Settings(BaseModel):
+        reacquire_step_m: float = Field(0.0, ge=0, description=REACQUIRE_HELP)
+        blend_half_life_s: float = Field(0.0, ge=0, description=BLEND_HELP)
+        blend_course: bool = Field(True, description=BLEND_COURSE_HELP)
+
+    @classmethod
+    def wanted(cls, options) -> bool:
+        return options.reacquire_step_m > 0 or options.blend_half_life_s > 0
+
+    def __init__(self, limb, options):
+        super().__init__(limb, options)
+        self.state = BlendState.empty(len(limb.joints), options.reacquire_step_m, options.blend_half_life_s,
+                                      options.blend_course)
+
+    def after(self, frame: LimbFrame) -> None:
+        self.state.frame_s = self.limb.clock.frame_s  # (the limb's clock: one for all its fills)
+        self.state.blend(frame.positions, frame.status, self.limb.joints, frame.frames)
 
 
 @njit(cache=True)

@@ -22,20 +22,13 @@ import numpy as np
 from numba import njit
 
 from mocap_core.analytic_fill import all_finite
+from mocap_core.fill_units import LimbFill, LimbFrame, switch
 from mocap_core.ik.kernels import mtv
-from mocap_core.skeleton import END_SITES, INDEX, JOINTS, LOCATED, MISSING
+from mocap_core.skeleton import END_SITES, INDEX, JOINTS, LIMBS, LOCATED, MISSING
 
 BODY_MODEL_HELP = ("beyond the thesis: a lone lost elbow or knee turned on its swivel circle towards where a "
                    "regression from the rest of the located body, learned online from this limb and the other "
                    "(mirrored), puts it (with swivel)")
-# The end model takes a lost limb over only once the gap has lasted this long: before, the limb held as it was,
-# with the blend's course on the markers' last motion, does better (most real gaps last a tenth of a second or
-# less), and a model taken at once makes more of the returns jump.
-END_WAIT_S = 0.2
-END_MODEL_HELP = ("beyond the thesis: a limb lost from its first joint down (elbow, wrist and hand; knee, ankle and "
-                  f"foot) has its end put, once the gap has lasted {END_WAIT_S:g} s, where a regression from the rest "
-                  "of the located body, learned online from this limb and the other (mirrored), puts it, and the "
-                  "joints between aim at it; the thesis held the lost limb as it was relative to its parent")
 MODELLED = frozenset({"elbow_l", "elbow_r", "knee_l", "knee_r"})
 MODELLED_ENDS = frozenset({"wrist_l", "wrist_r", "ankle_l", "ankle_r"})  # the end model's
 RIDGE = 10.0          # on standardized features: the fit is flat over an order of magnitude either side
@@ -121,6 +114,37 @@ class BodyModel:
     def _fit(self) -> None:
         self.mu, self.sd, self.y_mean, self.chol, self.coef = _fit(self.n[0], self.sx, self.sy, self.sxx, self.sxy)
         self.fitted_at = self.n[0]
+
+
+def chain_place(limb: str, names: frozenset[str]) -> int | None:
+    """Where the first of ``names`` sits in ``limb``'s chain (None: not in it)."""
+    return next((k for k, name in enumerate(LIMBS[limb]) if name in names), None)
+
+
+class BodyModelSteer(LimbFill):
+    """The body model as the IK stage's fill: it hands the swivel where the model puts the limb's lone lost
+    middle joint (the elbow, the knee), and how much to turn towards it."""
+    Settings = switch("body_model", BODY_MODEL_HELP)
+    needs = "swivel"
+    mirrored = True
+
+    @classmethod
+    def for_limb(cls, limb, options) -> "BodyModelSteer | None":
+        middle = chain_place(limb.limb, MODELLED)
+        return None if limb.other is None or middle is None else cls(limb, options, middle)
+
+    def __init__(self, limb, options, middle: int):
+        super().__init__(limb, options)
+        self.model = BodyModel(limb.joints, limb.other, middle, limb.parent_of_root)
+        n = len(limb.joints)
+        self.modelled, self.weight = np.full((n, 3), np.nan), np.zeros(n)
+
+    def before(self, frame: LimbFrame) -> None:
+        model = self.model
+        model.learn(frame.positions, frame.frames, frame.status)
+        self.modelled[model.k], self.weight[model.k] = model.predict(frame.positions, frame.frames, frame.status,
+                                                                     self.limb.clock.frame_s)
+        frame.modelled, frame.model_weight = self.modelled, self.weight
 
 
 @njit(cache=True)

@@ -188,6 +188,7 @@ def gap_run(take: GapTake, gap: Gap, solver: str = "ccd", constraints: bool = Tr
     """Hide the gap's joints in the take and fill them with the hip stage's ``hips`` (the pelvis when lost; lost
     limb landmarks rebuilt, recalled, a bony pair whose spacing jumped dropped), the solver and the fills; compare
     with the complete take."""
+    from mocap_core.fill_units import MarkerSet
     from mocap_core.landmark_fills import LandmarkFills, fill_take
     from mocap_core.localization import Localizer
 
@@ -209,8 +210,7 @@ def gap_run(take: GapTake, gap: Gap, solver: str = "ccd", constraints: bool = Tr
     # the profile's landmarks: those the complete take has somewhere
     present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(landmarks).all(axis=2).any(axis=0))]
     frame_s = 1.0 / rate_hz if rate_hz else float("nan")
-    landmark_fills = LandmarkFills(hips.rebuild, hips.pose_memory, take.tracking_of, present,
-                                   pair_guard=hips.pair_guard)
+    landmark_fills = LandmarkFills(hips, MarkerSet(take.tracking_of, present))
     lm, rebuilt = fill_take(landmark_fills.fill, lm, tracking=take.tracking, time_s=np.arange(len(lm)) * frame_s)
     if take.partial is not None:  # (given whole, not LandmarkFills' own: it would keep the hidden landmarks from markers)
         kept = take.partial[1] & ~hidden_lm & np.isnan(lm).any(axis=2)

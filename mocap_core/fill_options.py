@@ -1,33 +1,21 @@
-"""The gap fills beyond the thesis, typed and checked once for the nodes, the offline pipeline and the evaluations:
-the hip stage's (HipOptions) and the IK gap fill's (FillOptions). Every option off is the thesis's method.
+"""The gap fills beyond the thesis as each stage's options, typed and checked once for the nodes, the offline
+pipeline and the evaluations: the hip stage's (HipOptions) and the IK gap fill's (FillOptions). Each is made of
+the settings of the fills registered in mocap_core.fills. Every option off is the thesis's method.
 docs/gap_filling.md says what each adds, measured by leaving it out on every shared take."""
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from typing import ClassVar
 
-from mocap_core.body_model import BODY_MODEL_HELP, END_MODEL_HELP
+from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
+
+from mocap_core.fill_units import Fill
+from mocap_core.fills import LANDMARK_FILLS, LIMB_FILLS
 from mocap_core.hip_interpolation import WHEN_LOST_HELP, WhenLost
-from mocap_core.limb_memory import LIMB_MEMORY_HELP
-from mocap_core.pair_guard import PAIR_GUARD_HELP
-from mocap_core.pose_memory import POSE_MEMORY_HELP
-from mocap_core.segment_rebuild import REBUILD_HELP
-
-SWIVEL_HELP = ("beyond the thesis: missing joints between two located ones from bone lengths (each bone as long as on "
-               "average while located) and the swivel angle carried in the next joint's or the limb parent's frame")
-SEGMENT_CARRY_HELP = ("beyond the thesis: a lost ankle moves with its still-tracked foot (heel and toe markers), a "
-                      "lost hand or toe with the last tracked bone before it")
-REACQUIRE_HELP = ("beyond the thesis: close the gap to returning markers by at most this many metres a frame (0 = the "
-                  "thesis's method: jump)")
-BLEND_HELP = ("beyond the thesis: when a joint's markers are lost or come back, go on where the joint was heading and "
-              "let the offset to the new source die out as a critically damped spring that halves it in this many "
-              "seconds (0 = off: a jump at loss)")
-BLEND_COURSE_HELP = ("with blend_half_life_s: after a loss, stay on the markers' course and leave it for the fill only "
-                     "as it grows less trustworthy than the fill has been where the markers came back (learned per "
-                     "joint; false: the spring alone)")
 
 
 class _StageOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+    fills: ClassVar[tuple[type[Fill], ...]] = ()  # the fills these options are made of, in their order
 
     @classmethod
     def of(cls, params: BaseModel):
@@ -35,44 +23,44 @@ class _StageOptions(BaseModel):
         return cls(**{name: getattr(params, name) for name in cls.model_fields})
 
 
-class HipOptions(_StageOptions):
-    """The hip stage's fills: of the pelvis when every hip marker is lost, and of lost limb landmarks."""
+def _options(name: str, base: type[_StageOptions], fills: tuple[type[Fill], ...], doc: str):
+    """The options model of a stage: ``base``'s own fields and every fill's settings."""
+    fields = {}
+    for fill in fills:
+        for field, info in fill.Settings.model_fields.items():
+            fields.setdefault(field, (info.annotation, info))
+    model = create_model(name, __base__=base, __module__=__name__, __doc__=doc, **fields)
+    model.fills = fills
+    return model
+
+
+class _HipBase(_StageOptions):
     when_lost: WhenLost = Field("hold", description=WHEN_LOST_HELP)
-    rebuild: bool = Field(False, description=REBUILD_HELP)
-    pose_memory: bool = Field(False, description=POSE_MEMORY_HELP)
-    pair_guard: bool = Field(False, description=PAIR_GUARD_HELP)
 
 
-# The fills that learn from the mirrored limb: the torso, which has none, runs without them.
-MIRROR_FILLS = ("body_model", "end_model")
+def hip_options(fills: tuple[type[Fill], ...]):
+    """The hip stage's options with these landmark fills."""
+    return _options("HipOptions", _HipBase, fills,
+                    "The hip stage's fills: of the pelvis when every hip marker is lost, and of lost limb landmarks.")
 
 
-class FillOptions(_StageOptions):
-    """Which fills run beside the thesis's IK. The limb memory and the body model steer the swivel, so they need it;
-    the body and end models act on the four limbs only (MIRROR_FILLS)."""
-    swivel: bool = Field(False, description=SWIVEL_HELP)
-    segment_carry: bool = Field(False, description=SEGMENT_CARRY_HELP)
-    limb_memory: bool = Field(False, description=LIMB_MEMORY_HELP + " (with swivel)")
-    body_model: bool = Field(False, description=BODY_MODEL_HELP)
-    end_model: bool = Field(False, description=END_MODEL_HELP)
-    reacquire_step_m: float = Field(0.0, ge=0, description=REACQUIRE_HELP)
-    blend_half_life_s: float = Field(0.0, ge=0, description=BLEND_HELP)
-    blend_course: bool = Field(True, description=BLEND_COURSE_HELP)
-
+class _LimbBase(_StageOptions):
     @model_validator(mode="after")
-    def _steers_the_swivel(self):
-        idle = [name for name in ("limb_memory", "body_model") if getattr(self, name)]
-        if idle and not self.swivel:
-            raise ValueError(f"{' and '.join(idle)} steer the swivel, which is off: set swivel true, or "
-                             f"{' and '.join(idle)} false")
+    def _needs_on(self):
+        for need in dict.fromkeys(fill.needs for fill in self.fills if fill.needs):
+            idle = [fill.option() for fill in self.fills if fill.needs == need and fill.wanted(self)]
+            if idle and not getattr(self, need):
+                names = " and ".join(idle)
+                raise ValueError(f"{names} steer{'s' if len(idle) == 1 else ''} the {need}, which is off: set {need} "
+                                 f"true, or {names} false")
         return self
 
-    @staticmethod
-    def idle_on(limb: str) -> tuple[str, ...]:
+    @classmethod
+    def idle_on(cls, limb: str) -> tuple[str, ...]:
         """The fills that do nothing on ``limb``: on the torso, those that learn from a mirrored limb."""
-        return MIRROR_FILLS if limb == "torso" else ()
+        return tuple(fill.option() for fill in cls.fills if fill.mirrored) if limb == "torso" else ()
 
-    def for_limb(self, limb: str) -> "FillOptions":
+    def for_limb(self, limb: str):
         """These options as they act on ``limb``: without the fills idle there."""
         return self.model_copy(update=dict.fromkeys(self.idle_on(limb), False))
 
@@ -84,6 +72,17 @@ class FillOptions(_StageOptions):
             raise ValueError(f"{names} learn{'s' if len(idle) == 1 else ''} from the mirrored limb, which the torso "
                              f"has not: leave {names} out of the torso's params")
 
+
+def limb_options(fills: tuple[type[Fill], ...]):
+    """The IK stage's options with these limb fills."""
+    return _options("FillOptions", _LimbBase, fills,
+                    "Which fills run beside the thesis's IK, on each limb. A fill that steers another (the limb "
+                    "memory and the body model, the swivel) needs it on; those that learn from the mirrored limb "
+                    "act on the four limbs only.")
+
+
+HipOptions = hip_options(LANDMARK_FILLS)
+FillOptions = limb_options(LIMB_FILLS)
 
 # The studio's choice (the ``studio`` preset, mocap_core.presets): every option on.
 STUDIO_HIPS = HipOptions(when_lost="fit", rebuild=True, pose_memory=True, pair_guard=True)

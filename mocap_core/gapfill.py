@@ -32,22 +32,18 @@ from numba import njit
 
 from mocap_core import analytic_fill as af
 from mocap_core.analytic_fill import all_finite
-from mocap_core.blend import BlendState
-from mocap_core.body_model import END_WAIT_S, MODELLED, MODELLED_ENDS, BodyModel
+from mocap_core.blend import DEFAULT_FRAME_S
 from mocap_core.fill_options import FillOptions
+from mocap_core.fill_units import LimbFill, LimbFrame
+from mocap_core.frame_clock import FrameClock
 from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import ChainLimits, Solver, SolverParams, get_solver
 from mocap_core.ik.solvers_kernels import solve
-from mocap_core.limb_memory import LimbMemory
 from mocap_core.skeleton import ESTIMATED, HELD, INDEX, LIMBS, LOCATED, MISSING, PARENT
 
-# The limb whose poses, mirrored, each limb also remembers (limb memory).
+# The limb whose poses, mirrored, a limb's fills also learn from.
 MIRRORED = {"left_arm": "right_arm", "right_arm": "left_arm", "left_leg": "right_leg", "right_leg": "left_leg"}
-# A predicted end is put at most this share of the limb's reach from its root: the joints between stay bent.
-REACH_SHARE = 0.99
-# Joints that begin a rigid segment of two more joints (ankle, foot, toe: the foot's bones).
-CARRIED_BY_SEGMENT = frozenset({"ankle_l", "ankle_r"})
 
 
 @dataclass
@@ -60,11 +56,12 @@ class FillStats:
 
 
 class LimbFiller:
-    """Fills the gaps of one limb frame after frame. Owns the limb's previous solved chain."""
+    """Fills the gaps of one limb frame after frame: the fills ``options`` turn on (mocap_core.fills.LIMB_FILLS,
+    in their order; none: the thesis's method), then Algorithm 1. Owns the limb's previous solved chain and the
+    bone lengths learned, which the fills read too."""
 
     def __init__(self, limb: str, solver: Solver | str = "ccd", params: SolverParams | None = None,
                  constraints: Constraints | None = None, options: FillOptions = FillOptions()):
-        """``options``: the fills beyond the thesis (none: the thesis's method)."""
         if limb not in LIMBS:
             raise ValueError(f"unknown limb {limb!r} (limbs: {', '.join(LIMBS)})")
         options.refuse_idle(limb)
@@ -74,26 +71,13 @@ class LimbFiller:
         self.constraints = constraints or load_constraints()
         self.joints = np.array([INDEX[j] for j in LIMBS[limb]], dtype=np.int64)
         self.parent_of_root = INDEX[PARENT[LIMBS[limb][0]]]
+        other = MIRRORED.get(limb)
+        self.other = None if other is None else np.array([INDEX[j] for j in LIMBS[other]], dtype=np.int64)
         n = len(self.joints)
         self.prev_pos = np.full((n, 3), np.nan)        # the limb's last whole output
         self.prev_frames = np.full((n, 3, 3), np.nan)
         self.prev_parent_frame = np.full((3, 3), np.nan)
         self.has_prev = np.zeros(1, bool)
-        # Re-acquisition without a twitch (beyond the thesis): when a joint's markers come back, the
-        # gap between where IK had it and where the markers are is closed by at most reacquire_step_m per
-        # frame (a rate-limited decaying offset, like game engines' inertialization); 0 = off.
-        # Inertialization at both ends of a gap (blend_half_life_s): a joint whose markers are lost
-        # goes on where it was heading, then eases into the estimate; one whose markers come back eases into
-        # them. The offset dies out as a critically damped spring (mocap_core/blend.py).
-        o = options
-        self.blend = BlendState.empty(n, o.reacquire_step_m, o.blend_half_life_s, o.blend_course)
-        # Beyond the thesis (mocap_core/analytic_fill.py): runs of missing joints between located
-        # ones on their swivel circle; a lost ankle carried by its foot and a lost end by the bone
-        # before it. State: the last well-defined bend direction per run (joint, end, frame kind),
-        # and each bone's direction statistics in the frame of the joint it ends at.
-        self.swivel = o.swivel
-        self.bend, self.bend_ok = np.zeros((n, n + 1, 2, 3)), np.zeros((n, n + 1, 2), bool)
-        self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
         # Bone lengths learned online: each bone's mean length over the frames that located both its joints
         # (sum, count). The IK chains and the swivel keep them (the thesis's rigid bones): the last whole frame's
         # would keep its marker noise, and the stretch of a limb that straightened past its reach, the whole gap.
@@ -101,67 +85,30 @@ class LimbFiller:
         self.seen = np.zeros(n, bool)    # joints located at least once
         self.chain_end = n               # the limb's joints up to its last one ever located
         self._chain = None               # and what the kernel takes of them (_chain_up_to)
-        other = MIRRORED.get(limb)  # the other limb's chain, whose poses both memories learn too, mirrored
-        other_idx = None if other is None else np.array([INDEX[j] for j in LIMBS[other]], dtype=np.int64)
-        self.memory = LimbMemory(n, other_idx) if o.limb_memory else None
-        self.no_recall = np.full((n, 3), np.nan)
-        self.body_model, self.end_model = self._models(o, other_idx)
-        self.modelled, self.model_weight = np.full((n, 3), np.nan), np.zeros(n)
-        self.end_local = np.full(3, np.nan)  # the lost end's offset from the root where the gap began
-        self.end_seen = False                 # and whether its markers were the end's last source
-        self.end_since = 0.0                  # and how long the limb has been lost
-        self.carried = np.array([(k, k + 1, k + 2) for k, name in enumerate(LIMBS[limb])
-                                 if name in CARRIED_BY_SEGMENT], dtype=np.int64).reshape(-1, 3) \
-            if o.segment_carry else None
+        self.clock = FrameClock(DEFAULT_FRAME_S)  # the frames' interval, from their times
+        made = (fill.for_limb(self, options) for fill in options.fills if fill.wanted(options))
+        self.fills: list[LimbFill] = [fill for fill in made if fill is not None]
+        # what the swivel reads where no fill steers it
+        self.no_recall, self.no_model, self.no_weight = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n)
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
         self.limits = ChainLimits(np.eye(3), c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                                   c.twists[self.joints], c.has_twist[self.joints])  # (each run's ref0 its own)
 
-    def _models(self, o: FillOptions, other_idx) -> tuple[BodyModel | None, BodyModel | None]:
-        """The body model: a lone lost elbow or knee turned on its circle towards where a regression from the rest
-        of the located body puts it (mocap_core.body_model). The end model: a limb lost from its first joint down
-        (elbow, wrist and hand; knee, ankle and foot) has its end put where the same kind of regression puts it,
-        learned from the wrist's (ankle's) place from the shoulder (hip); the joints between then aim at it
-        (Algorithm 1 held the limb as it was relative to its parent). Both learn from the other limb too, so
-        the torso has neither."""
-        names = LIMBS[self.limb]
-        middle = [k for k, name in enumerate(names) if name in MODELLED]
-        ends = [k for k, name in enumerate(names) if name in MODELLED_ENDS]
-        if other_idx is None or not middle:
-            return None, None
-        body = BodyModel(self.joints, other_idx, middle[0], self.parent_of_root) if o.body_model else None
-        end = BodyModel(self.joints, other_idx, ends[0], self.parent_of_root, root=middle[0] - 1) \
-            if o.end_model and ends else None
-        return body, end
+    def get(self, kind: type) -> LimbFill | None:
+        """This limb's fill of that class, if on."""
+        return next((fill for fill in self.fills if isinstance(fill, kind)), None)
 
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray,
              time_s: float = float("nan")) -> FillStats:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton).
-        ``time_s``: the frame's capture time, which paces the blend (else blend.DEFAULT_FRAME_S a frame)."""
+        ``time_s``: the frame's capture time, which paces the fills (else blend.DEFAULT_FRAME_S a frame)."""
         t0 = time.perf_counter()
-        self.blend.advance_clock(time_s)
-        out = np.zeros(4)
-        idx, prev_pos, prev_frames = self.joints, self.prev_pos, self.prev_frames
-        if self.end_model is not None:  # (before the carry, which would hold the whole lost limb with the clavicle)
-            out[0] += self._predict_end(positions, frames, status)
-        if self.carried is not None and self.has_prev[0]:
-            out[0] += af.segment_carry(positions, frames, status, idx, self.carried, prev_pos, prev_frames)
-            out[1] += af.carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames)
+        self.clock.advance(time_s)
+        idx = self.joints
+        frame = LimbFrame(positions, frames, status, np.zeros(4), self.no_recall, self.no_model, self.no_weight)
         af.learn_lengths(positions, status, idx, self.lengths)
-        if self.swivel:
-            af.learn_directions(positions, frames, status, idx, self.dir_sum, self.dir_sq, self.dir_n)
-            recalled = self.no_recall
-            if self.memory is not None:
-                self.memory.learn(positions, frames, status, idx, self.parent_of_root)
-                recalled = self.memory.recall(positions, frames, status, idx, self.parent_of_root)
-            if self.body_model is not None:
-                self._model(positions, frames, status)
-            if self.has_prev[0]:
-                out[0] += af.swivel_fill(positions, frames, status, idx, self.parent_of_root, prev_pos, prev_frames,
-                                         self.prev_parent_frame, self.bend, self.bend_ok, self.dir_sum,
-                                         self.dir_sq, self.dir_n, recalled,
-                                         self.lengths, self.modelled,
-                                         self.model_weight)
+        for fill in self.fills:
+            fill.before(frame)
         # a limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
         # wrist (the hand, never seen, would keep the limb from ever being whole, and so from ever being filled)
         self.seen |= status[idx] == LOCATED
@@ -169,11 +116,12 @@ class LimbFiller:
         if n != self.chain_end or self._chain is None:  # a joint seen for the first time: the limb is whole again
             self.chain_end, self.has_prev[0] = n, False        # only once it is seen
             self._chain = self._chain_up_to(n)
+        out = frame.out
         _fill_limb(positions, frames, status, *self._chain, self.solver.kernel_id, *self.params, out)
         never = idx[n:]  # joints never located (the carries would hold them from nothing)
         positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
-        if self.blend.on:
-            self.blend.blend(positions, status, idx, frames)
+        for fill in self.fills:
+            fill.after(frame)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 
@@ -185,48 +133,6 @@ class LimbFiller:
         return (self.joints[:n], self.parent_of_root, self.limb.endswith("arm"), self.prev_pos[:n],
                 self.prev_frames[:n], self.prev_parent_frame, self.has_prev, self.lengths, lim.pp[:n], lim.cones[:n],
                 lim.has_cone[:n], lim.twists[:n], lim.has_twist[:n])
-
-    def _predict_end(self, positions, frames, status) -> int:
-        """The end model's point for a limb lost from its first joint down, within the limb's reach; 1 if put."""
-        model = self.end_model
-        model.learn(positions, frames, status)
-        idx, root, k = self.joints, model.root, model.k
-        if status[idx[k]] != MISSING:  # seen, or put by the hip stage's fills (the leg hinge, say)
-            self.end_seen = status[idx[k]] == LOCATED
-        # a limb whose better fill drops out for a few frames is held as that fill left it, not handed to the
-        # model and back (each hand-over is a jump of its own)
-        if not self.has_prev[0] or not (self.end_seen or all_finite(self.end_local)):
-            return 0
-        point, weight = model.predict(positions, frames, status, self.blend.frame_s)
-        if not all_finite(point):
-            self.end_local[:] = np.nan
-            return 0
-        parent = frames[self.parent_of_root]
-        if not all_finite(self.end_local):  # the gap begins: the end as it was, in the limb parent's frame
-            self.end_local[:] = self.prev_parent_frame.T @ (self.prev_pos[k] - self.prev_pos[root])
-            self.end_since = 0.0
-        self.end_since += self.blend.frame_s  # (seconds into the gap)
-        if self.end_since < END_WAIT_S - self.blend.frame_s / 2:  # to the nearest frame: stamps are rounded (QTM's
-            return 0                                               # to the microsecond), sums of 1/rate inexact
-        held = positions[idx[root]] + parent @ self.end_local
-        if all_finite(held):  # a pose unlike those learned moves the end less far from where it was held
-            point = held + weight * (point - held)
-        bones = [af._length(self.lengths, j, float(np.linalg.norm(self.prev_pos[j + 1] - self.prev_pos[j])))
-                 for j in range(root, k)]  # as the swivel takes them
-        reach = REACH_SHARE * sum(bones)
-        out = point - positions[idx[root]]
-        size = float(np.linalg.norm(out))
-        if size > reach:  # a bent limb's joints cannot be placed between root and an end out of reach
-            point = positions[idx[root]] + out * (reach / size)
-        positions[idx[k]] = point
-        status[idx[k]] = ESTIMATED
-        return 1
-
-    def _model(self, positions, frames, status) -> None:
-        model = self.body_model
-        model.learn(positions, frames, status)
-        self.modelled[model.k], self.model_weight[model.k] = model.predict(positions, frames, status,
-                                                                             self.blend.frame_s)
 
 
 @njit(cache=True)

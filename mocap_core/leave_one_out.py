@@ -20,15 +20,18 @@ from mocap_core.skeleton import INDEX
 
 KEEP_MM = 2.0
 STUDIO = "studio"
-# Each option as the thesis leaves it (off); the limb memory and the body model steer the swivel, so the swivel
-# is left out with them.
-LEFT_OUT = {name: ("hips", value) for name, value in (("when_lost", "hold"), ("rebuild", False),
-                                                       ("pose_memory", False), ("pair_guard", False))} | \
-           {name: ("ik", value) for name, value in (("swivel", False), ("segment_carry", False),
-                                                     ("limb_memory", False), ("body_model", False),
-                                                     ("end_model", False), ("reacquire_step_m", 0.0),
-                                                     ("blend_half_life_s", 0.0), ("blend_course", False))}
-STEERS_SWIVEL = {"limb_memory": False, "body_model": False}
+
+
+def _off(field) -> object:
+    """An option as the thesis leaves it: a switch off, a setting at zero, a choice at its default."""
+    return {bool: False, float: 0.0}.get(field.annotation, field.default)
+
+
+# Each option as the thesis leaves it; one that others steer is left out with them (STEERED_BY).
+LEFT_OUT = {name: (stage, _off(field)) for stage, model in (("hips", HipOptions), ("ik", FillOptions))
+            for name, field in model.model_fields.items()}
+STEERED_BY = {need: {fill.option(): False for fill in FillOptions.fills if fill.needs == need}
+              for need in {fill.needs for fill in FillOptions.fills if fill.needs}}
 
 
 def without(option: str) -> Options:
@@ -39,7 +42,7 @@ def without(option: str) -> Options:
     stage, value = LEFT_OUT[option]
     if stage == "hips":
         return replace(studio, hips=HipOptions(**{**studio.hips.model_dump(), option: value}))
-    extra = STEERS_SWIVEL if option == "swivel" else {}
+    extra = STEERED_BY.get(option, {})
     return replace(studio, ik=FillOptions(**{**studio.ik.model_dump(), option: value, **extra}))
 
 

@@ -34,11 +34,13 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from mocap_core.fill_units import LandmarkFill, MarkerSet
 from mocap_core.frame_clock import FrameClock
 from mocap_core.ik.kernels import (axis_angle, best_roll, follow, mm, mv, rigid_fit_first, rotation_between,
                                    vfinite, vnorm)
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX
+from mocap_core.segment_rebuild import SegmentRebuilder
 
 # The points of one leg's model, in this order: the hip centre, the knee's epicondyles (the bend's axis),
 # the malleoli, and the shank marker.
@@ -61,9 +63,16 @@ ROLL_PRICE = 0.001
 DISTANCE_RATE = 1 / 100  # how fast the learned hip-epicondyle distances follow the frames that measure them
 
 
-class LegHinge:
-    """Fills lost knee and ankle landmarks frame by frame. Keep one per actor: it owns each leg's shape.
-    ``tracking_of``: the segment of each tracking marker passed to :meth:`fill` (LandmarkMap.tracking_of)."""
+class LegHinge(LandmarkFill):
+    """Fills lost knee and ankle landmarks frame by frame, with the segment rebuild. Keep one per actor: it owns
+    each leg's shape. ``tracking_of``: the segment of each tracking marker passed to :meth:`fill`
+    (LandmarkMap.tracking_of)."""
+    Settings = SegmentRebuilder.Settings
+
+    @classmethod
+    def for_marker_set(cls, markers: MarkerSet) -> "LegHinge | None":
+        hinge = cls(markers.tracking_of)
+        return hinge if hinge.active else None
 
     def __init__(self, tracking_of: Sequence[str] = (), roll_price: float = ROLL_PRICE):
         self.n_tracking = len(tracking_of)
@@ -84,19 +93,15 @@ class LegHinge:
         self.clock = FrameClock(1 / 120)               # (the frames' interval, from their times)
         self.active = bool((self.legs[:, -1] >= 0).any())  # False: no shank marker, nothing to fill from
 
-    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None,
-             rebuilt: np.ndarray | None = None, time_s: float = np.nan) -> np.ndarray:
-        """One frame of landmarks (n_landmarks, 3), NaN = lost, and the tracking markers (n_tracking, 3);
-        ``rebuilt``: the mask of the landmarks the segment rebuild put this frame (their roll is settled);
-        ``time_s``: the frame's time (the course's length is in seconds).
-        Fills in place; returns the mask of the landmarks filled."""
+    def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
+        """One frame (LandmarkFill.fill), in place. ``filled``: what the segment rebuild put this frame (their roll
+        is settled); ``time_s``: the course's length is in seconds."""
         out = np.zeros(len(landmarks), np.bool_)
         if tracking is None or not self.active:
             return out
         if len(tracking) != self.n_tracking:  # (as the segment rebuild: a caller's mistake, not bad input)
             raise ValueError(f"expected {self.n_tracking} tracking markers, got {len(tracking)}")
-        if rebuilt is None:
-            rebuilt = np.zeros(len(landmarks), np.bool_)
+        rebuilt = np.zeros(len(landmarks), np.bool_) if filled is None else filled
         tracking = np.asarray(tracking, np.float64)
         self.clock.advance(float(time_s))
         fill_frame(landmarks, tracking, rebuilt, self.legs, self.shank_markers, self.shape, self.turn, self.bend,

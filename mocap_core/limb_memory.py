@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from mocap_core.analytic_fill import all_finite
+from mocap_core.fill_units import LimbFill, LimbFrame, switch
 from mocap_core.ik.kernels import mtv, mv
 from mocap_core.skeleton import LOCATED, MISSING
 from mocap_core.remembered_poses import CAPACITY, keep, nearest  # per joint and source; a pose per 5 mm
@@ -33,12 +34,15 @@ MIN_POSES = 30      # poses before the memory is trusted
 MIRROR = np.array([-1.0, 1.0, 1.0])
 
 
-class LimbMemory:
+class LimbMemory(LimbFill):
     """State of one limb's memory: per middle joint k of the chain (k-1, k, k+1), a ring of the limb's
-    own poses [0] and one of the other limb's, mirrored [1]. ``other``: the other limb's chain indices
-    (same length), or None."""
+    own poses [0] and one of the other limb's, mirrored [1] (where the limb has another)."""
+    Settings = switch("limb_memory", LIMB_MEMORY_HELP + " (with swivel)")
+    needs = "swivel"
 
-    def __init__(self, n: int, other: np.ndarray | None):
+    def __init__(self, limb, options):
+        super().__init__(limb, options)
+        n, other = len(limb.joints), limb.other
         self.other = np.asarray(other if other is not None else np.full(n, -1), np.int64)
         self.keys = np.full((n, 2, CAPACITY, 3), np.inf)   # the next joint from the one before (parent frame)
         self.vals = np.zeros((n, 2, CAPACITY, 1, 3))       # the middle joint from the one before
@@ -46,12 +50,12 @@ class LimbMemory:
         self.last = np.full((n, 2, 3), np.inf)             # the last key kept
         self.pred = np.full((n, 3), np.nan)                # this frame's recalled positions (world)
 
-    def learn(self, positions, frames, status, idx, parent) -> None:
-        _learn(positions, frames, status, idx, self.other, parent, self.keys, self.vals, self.state, self.last)
-
-    def recall(self, positions, frames, status, idx, parent) -> np.ndarray:
-        _recall(positions, frames, status, idx, parent, self.keys, self.vals, self.state, self.pred)
-        return self.pred
+    def before(self, frame: LimbFrame) -> None:
+        """Learn this frame's pose, and hand the swivel where the poses learned put the lost joints."""
+        p, f, s, idx, parent = frame.positions, frame.frames, frame.status, self.limb.joints, self.limb.parent_of_root
+        _learn(p, f, s, idx, self.other, parent, self.keys, self.vals, self.state, self.last)
+        _recall(p, f, s, idx, parent, self.keys, self.vals, self.state, self.pred)
+        frame.recalled = self.pred
 
 
 @njit(cache=True)

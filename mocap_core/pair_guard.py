@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from mocap_core.blend import DEFAULT_FRAME_S
+from mocap_core.fill_units import LandmarkFill, switch
 from mocap_core.ik.kernels import vnorm
 from mocap_core.profiles import LANDMARK_INDEX
 from mocap_core.segment_rebuild import BONY_PAIRS
@@ -33,8 +34,10 @@ PAIR_GUARD_HELP = ("beyond the thesis: a bony pair (styloids, malleoli) whose sp
                    "(marked lost, for the gap fills) until it is back")
 
 
-class PairGuard:
-    """Drops the bony pairs whose spacing is off, frame by frame. Keep one per actor: it learns the spacings."""
+class PairGuard(LandmarkFill):
+    """Drops the bony pairs whose spacing is off, frame by frame, for the fills after it. Keep one per actor: it
+    learns the spacings."""
+    Settings = switch("pair_guard", PAIR_GUARD_HELP)
 
     def __init__(self):
         self.pairs = np.array([[LANDMARK_INDEX[a], LANDMARK_INDEX[b]] for a, b in PAIRS])
@@ -45,19 +48,20 @@ class PairGuard:
         self.began = np.zeros(len(PAIRS), np.bool_)  # which the last frame began to drop
         self.last_time = np.nan
 
-    def fill(self, landmarks: np.ndarray, time_s: float = np.nan) -> np.ndarray:
-        """One frame of landmarks (n_landmarks, 3), in place: the dropped pairs set to NaN; returns their mask.
+    def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
+        """One frame (LandmarkFill.fill), in place: the dropped pairs set to NaN; it puts nothing (an empty mask).
         A dropped pair not both seen is taken back: the one seen cannot be told wrong."""
         dt = time_s - self.last_time if np.isfinite(time_s - self.last_time) else DEFAULT_FRAME_S
         self.last_time = time_s
         mask = np.zeros(len(landmarks), np.bool_)
         guard_frame(landmarks, self.pairs, self.spacing, self.dropped, self.held, self.held_s, self.began, dt, mask)
-        return mask
+        return np.zeros(len(landmarks), np.bool_)
 
-    def said(self) -> list[str]:
-        """What the last frame began to drop, for a log."""
-        return [f"{PAIRS[p][0]} and {PAIRS[p][1]} {self.held[p] * 1000:.0f} mm apart where they were "
-                f"{self.spacing[p] * 1000:.0f}" for p in np.flatnonzero(self.began)]
+    def said(self) -> list[tuple[str, str]]:
+        """What the last frame began to drop."""
+        return [("pair_dropped", f"{PAIRS[p][0]} and {PAIRS[p][1]} {self.held[p] * 1000:.0f} mm apart where they "
+                 f"were {self.spacing[p] * 1000:.0f}: both dropped until their spacing is back")
+                for p in np.flatnonzero(self.began)]
 
 
 @njit(cache=True)

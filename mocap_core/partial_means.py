@@ -13,8 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from mocap_core.fill_units import LandmarkFill, MarkerSet
 from mocap_core.ik.kernels import mv, nearness_weight, rigid_fit_weighted
 from mocap_core.profiles import LandmarkMap
+from mocap_core.segment_rebuild import SegmentRebuilder
 
 # The markers nearest a lost member (in its landmark's last whole frame) whose rotation turns its offset, each
 # weighed by its nearness to the member. A turn from fewer is noise; from more, or from farther ones, it follows
@@ -22,12 +24,17 @@ from mocap_core.profiles import LandmarkMap
 NEIGHBOURS = 4
 
 
-class PartialMeans:
+class PartialMeans(LandmarkFill):
     """Fills, frame by frame, the landmarks still lost that are the mean of several markers of which some are
     seen. It runs after the other landmark fills (the hips', then last in LandmarkFills), and fills only what
     they could not: the segment rebuild's rigid foot puts a kicking toe better than its one metatarsal marker
     left. Keep one per actor and marker set: it keeps, per such landmark, the last frame in which all its markers
-    were seen."""
+    were seen. On with the segment rebuild."""
+    Settings = SegmentRebuilder.Settings
+
+    @classmethod
+    def for_marker_set(cls, markers: MarkerSet) -> "PartialMeans | None":
+        return None if markers.means is None else cls(markers.means)
 
     def __init__(self, landmark_map: LandmarkMap):
         self.map = landmark_map
@@ -36,11 +43,11 @@ class PartialMeans:
         self.last_whole = np.full((len(self.means), landmark_map.n_labels, 3), np.nan)
         self.turns = np.tile(np.eye(3), (len(self.means), 1, 1))  # and how its nearest markers turned since
 
-    def fill(self, landmarks: np.ndarray, markers: np.ndarray) -> np.ndarray:
-        """One frame: ``landmarks`` (n_landmarks, 3) from the map and the fills before, its lost ones filled in place
-        from ``markers`` (n_labels, 3) as received; returns the mask of the landmarks filled."""
+    def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
+        """One frame (LandmarkFill.fill): ``landmarks`` from the map and the fills before, its lost ones filled in
+        place from ``markers`` (n_labels, 3) as received (None: nothing is)."""
         filled = np.zeros(len(landmarks), bool)
-        if len(self.means):
+        if len(self.means) and markers is not None:
             _fill_means(np.asarray(markers, np.float64), landmarks, self.map.idx, self.count, self.means,
                         self.last_whole, self.turns, filled)
         return filled

@@ -17,6 +17,8 @@ from mocap_core.presets import PRESETS, Options
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
+from mocap_core.fill_options import HipOptions
+from mocap_core.fill_units import MarkerSet
 from mocap_core.landmark_fills import LandmarkFills, fill_take
 from mocap_core.localization import Localizer
 from mocap_core.marker_gate import MarkerGate
@@ -47,9 +49,8 @@ class SkeletonPipeline:
         hips = options.hips
         self.hips = HipInterpolator(when_lost=hips.when_lost)
         # the landmark fills are gap fills
-        self.fills = LandmarkFills(hips.rebuild and fill_gaps, hips.pose_memory and fill_gaps,
-                                   self.landmark_map.tracking_of, self.landmark_map.present(), self.landmark_map,
-                                   pair_guard=hips.pair_guard and fill_gaps)
+        m = self.landmark_map
+        self.fills = LandmarkFills(hips if fill_gaps else HipOptions(), MarkerSet(m.tracking_of, m.present(), m))
         self.localizer = Localizer(profile.body)
         self.filler = GapFiller(solver, params, constraints, options.ik) if fill_gaps else None
 

@@ -44,6 +44,7 @@ from typing import Iterable, Sequence
 import numpy as np
 from numba import njit
 
+from mocap_core.fill_units import LandmarkFill, MarkerSet, switch
 from mocap_core.frame_clock import FrameClock
 from mocap_core.ik.kernels import follow, mm, mtv, mv, rotation_between, rotation_vector, turned_by, vfinite, vnorm
 from mocap_core.localization import hip_centres
@@ -111,9 +112,14 @@ SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_I
 L_TOE = LANDMARK_INDEX[f"L_{KEY}"]
 
 
-class PoseMemory:
+class PoseMemory(LandmarkFill):
     """Fills lost knee and ankle landmarks frame by frame. Keep one per actor: it owns the poses.
     ``present``: the landmark names the profile has (LandmarkMap.present())."""
+    Settings = switch("pose_memory", POSE_MEMORY_HELP)
+
+    @classmethod
+    def for_marker_set(cls, markers: MarkerSet) -> "PoseMemory":
+        return cls(markers.present, markers.tracking_of)
 
     def __init__(self, present: Iterable[str], tracking_of: Sequence[str] = ()):
         present = set(present)
@@ -160,12 +166,9 @@ class PoseMemory:
         self.pelvis_axes = np.zeros((3, 3))                  # the tracked pelvis frame (track_pelvis): its axes,
         self.pelvis_motion = np.zeros((4, 3))                # origin, step, turn per frame, and tracking or not
 
-    def fill(self, landmarks: np.ndarray, filled: np.ndarray | None = None,
-             tracking: np.ndarray | None = None, time_s: float = np.nan) -> np.ndarray:
-        """One frame of landmarks (n_landmarks, 3) float64, NaN = lost; ``filled``: the landmarks an
-        earlier stage estimated this frame (never learned from); ``tracking``: the profile's tracking
-        markers (n_tracking, 3; None: none given); ``time_s``: the frame's time (NaN: not known, and the
-        poses are found by the toe's place alone). Fills in place; returns the mask it filled."""
+    def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
+        """One frame (LandmarkFill.fill), in place. ``time_s`` NaN: the poses are found by the toe's place
+        alone."""
         if filled is None:
             if self._nothing_filled is None or len(self._nothing_filled) != len(landmarks):
                 self._nothing_filled = np.zeros(len(landmarks), np.bool_)

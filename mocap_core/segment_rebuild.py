@@ -38,6 +38,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from mocap_core.fill_units import LandmarkFill, MarkerSet, switch
 from mocap_core.ik.kernels import (angle_about, axis_angle, best_roll, follow, line_carry, mv, nearness_weight,
                                    rigid_fit_weighted, vfinite, vnorm)
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS, TRACKING_BONES
@@ -203,9 +204,14 @@ def segment_table(tracking_of: Sequence[str] = ()
     return table, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, np.array(pairs, np.int64), lone
 
 
-class SegmentRebuilder:
+class SegmentRebuilder(LandmarkFill):
     """Fills lost limb landmarks frame by frame. Keep one per actor: it owns the reference frames.
     ``tracking_of``: the segment of each tracking marker passed to :meth:`fill` (LandmarkMap.tracking_of)."""
+    Settings = switch("rebuild", REBUILD_HELP)
+
+    @classmethod
+    def for_marker_set(cls, markers: MarkerSet) -> "SegmentRebuilder":
+        return cls(markers.tracking_of)
 
     def __init__(self, tracking_of: Sequence[str] = ()):
         (self.segments, self.rebuilt_count, self.rigid_count, self.refined_count,
@@ -226,12 +232,10 @@ class SegmentRebuilder:
         self.along = np.full((len(self.segments), width), -1, np.int64)
         self.along_since = np.full((len(self.segments), width), np.nan)
 
-    def fill(self, landmarks: np.ndarray, tracking: np.ndarray | None = None, time_s: float = np.nan
-             ) -> np.ndarray:
-        """One frame of landmarks (n_landmarks, 3) float64, NaN = lost, and of the tracking markers
-        (n_tracking, 3): fill what can be rebuilt, in place; returns the mask of rebuilt landmarks. ``time_s``:
-        the frame's time (NaN: unknown, and a marker slid with its pair's spacing kept is not found,
-        SLID_ALONG_S)."""
+    def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
+        """One frame (LandmarkFill.fill): fill what can be rebuilt, in place. ``tracking``: as many as
+        ``tracking_of`` said; ``time_s`` NaN: a marker slid with its pair's spacing kept is not found
+        (SLID_ALONG_S)."""
         points = landmarks
         if self.n_tracking:
             if tracking is None or len(tracking) != self.n_tracking:

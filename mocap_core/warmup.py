@@ -189,7 +189,7 @@ def _warm_beyond() -> None:
 
 
 def _warm_limb(solver: str, options) -> None:
-    from mocap_core.body_model import MIN_SAMPLES
+    from mocap_core.body_model import MIN_SAMPLES, BodyModelSteer
     from mocap_core.gapfill import LimbFiller
     from mocap_core.skeleton import N_JOINTS, Status
 
@@ -199,7 +199,7 @@ def _warm_limb(solver: str, options) -> None:
     status = np.full(N_JOINTS, Status.LOCATED, np.uint8)
     for k, j in enumerate(filler.joints):
         pos[j] = [0.0, 0.1, 1.0 - 0.2 * k]
-    for _ in range(MIN_SAMPLES if filler.body_model is not None else 1):  # until the body model predicts
+    for _ in range(MIN_SAMPLES if filler.get(BodyModelSteer) else 1):  # until the body model predicts
         filler.fill(pos, frames, status)
     status[filler.joints[1]] = Status.MISSING
     pos[filler.joints[1]] = np.nan

@@ -18,6 +18,7 @@ from pydantic import ConfigDict, Field, model_validator
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.fill_options import HipOptions
 from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, HipInterpolator
+from mocap_core.fill_units import MarkerSet
 from mocap_core.landmark_fills import LandmarkFills
 from mocap_core.marker_gate import MarkerGate
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
@@ -71,8 +72,7 @@ class HipInterpolation(Node):
             self.map = self.profile.resolve(msg.labels)
             self.labels = msg.labels
             # (new ones: what they learned was of the old marker set's landmarks)
-            self.fills = LandmarkFills(self.params.rebuild, self.params.pose_memory, self.map.tracking_of,
-                                       self.map.present(), self.map, pair_guard=self.params.pair_guard)
+            self.fills = LandmarkFills(self.params, MarkerSet(self.map.tracking_of, self.map.present(), self.map))
             if (self.params.rebuild or self.params.pose_memory) and self.map.absent_tracking:
                 self.log.warning("tracking markers %s of profile %s are not in the stream: gaps filled "
                                  "without them", ", ".join(self.map.absent_tracking), self.profile.name)
@@ -85,12 +85,10 @@ class HipInterpolation(Node):
         lm = self.map.apply(positions)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
-        fills_on = self.params.rebuild or self.params.pose_memory  # (both read the tracking markers)
-        rebuilt = self.fills.fill(lm, self.map.tracking(positions) if fills_on else None,
+        rebuilt = self.fills.fill(lm, self.map.tracking(positions) if self.fills.fills else None,
                                   msg.header.capture_time_s, positions)
-        if self.fills.guard is not None:
-            for said in self.fills.guard.said():
-                self.ctx.count_error("pair_dropped", f"{said}: both dropped until their spacing is back")
+        for kind, said in self.fills.said():
+            self.ctx.count_error(kind, said)
         flags = np.where(np.isnan(lm).any(axis=1), FLAG_MISSING, FLAG_MEASURED).astype(np.uint8)
         flags[HIP_INDEX[interpolated]] = FLAG_INTERPOLATED
         if rebuilt is not None:

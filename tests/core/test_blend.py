@@ -364,8 +364,8 @@ def test_without_a_half_life_the_loss_jumps_and_the_return_closes_linearly_as_be
 def test_the_clock_keeps_the_last_interval_when_stamps_loop_or_are_missing():
     filler = LimbFiller("left_arm", options=FillOptions(blend_half_life_s=HALF_LIFE))
     for t in (0.0, 0.004, 0.008, 0.0, float("nan"), 5.0):  # a looping file, a missing stamp, a pause
-        filler.blend.advance_clock(t)
-    assert filler.blend.frame_s == pytest.approx(0.004)
+        filler.clock.advance(t)
+    assert filler.clock.frame_s == pytest.approx(0.004)
 
 
 def test_short_gaps_on_a_dancers_elbow():

@@ -2,6 +2,7 @@
 import numpy as np
 
 from mocap_core.body_model import MAX_SPEED_M_S, MAX_WEIGHT, MIN_SAMPLES, BodyModel
+from mocap_core.end_model import EndModel
 from mocap_core.experiments import Gap, GapTake, gap_run
 from mocap_core.fill_options import STUDIO, FillOptions, HipOptions
 from mocap_core.gapfill import LimbFiller
@@ -272,8 +273,8 @@ def test_a_nan_flood_leaves_the_end_model_working():
     learned = []
     for f in range(len(pos)):
         filler.fill(pos[f], frames[f], status[f], f / 60.0)
-        learned.append(filler.end_model.n[0])
-    assert learned[149] == learned[129] and np.isfinite(filler.end_model.sxx).all()
+        learned.append(filler.get(EndModel).model.n[0])
+    assert learned[149] == learned[129] and np.isfinite(filler.get(EndModel).model.sxx).all()
     late = hidden & (np.arange(len(pos)) > 200) & ((np.arange(len(pos)) - 60) % 120 >= 12)
     assert (status[late, INDEX["wrist_l"]] == Status.ESTIMATED).all() and np.isfinite(pos[hidden]).all()
 

@@ -18,7 +18,7 @@ def test_each_option_left_out_alone_and_the_swivel_with_what_steers_it():
         assert getattr(got, other) == getattr(studio, other)
     assert without("swivel").ik == studio.ik.model_copy(update={"swivel": False, "limb_memory": False,
                                                                "body_model": False})
-    with pytest.raises(ValueError, match="steer the swivel"):
+    with pytest.raises(ValueError, match="steers the swivel"):
         FillOptions(limb_memory=True)
 
 

@@ -2,10 +2,13 @@
 import numpy as np
 import pytest
 
+from mocap_core.fill_options import HipOptions
+from mocap_core.fill_units import MarkerSet
 from mocap_core.landmark_fills import LandmarkFills, fill_take
 from mocap_core.leg_hinge import COURSE_S, LegHinge
 from mocap_core.localization import hip_centres
 from mocap_core.profiles import LANDMARK_INDEX, LANDMARKS
+from mocap_core.segment_rebuild import SegmentRebuilder
 
 from tests.conftest import data_file
 
@@ -150,8 +153,8 @@ def test_a_knee_rebuilt_from_the_marker_and_the_ankle_alone_gets_its_roll_from_t
     fle, fme, fal, tam = (LANDMARK_INDEX[n] for n in KNEE_ANKLE)
     hinge, priced = LegHinge(["R_shank"], roll_price=0.0), LegHinge(["R_shank"])
     for f in range(100):
-        assert not hinge.fill(lm[f].copy(), marker[f], np.zeros(len(LANDMARKS), bool)).any()
-        priced.fill(lm[f].copy(), marker[f], np.zeros(len(LANDMARKS), bool))
+        assert not hinge.fill(lm[f].copy(), marker[f], filled=np.zeros(len(LANDMARKS), bool)).any()
+        priced.fill(lm[f].copy(), marker[f], filled=np.zeros(len(LANDMARKS), bool))
     rebuilt = np.zeros(len(LANDMARKS), bool)
     rebuilt[[fle, fme]] = True
     error, given, error_priced = [], [], []
@@ -160,8 +163,8 @@ def test_a_knee_rebuilt_from_the_marker_and_the_ankle_alone_gets_its_roll_from_t
         frame[tam] = np.nan
         frame[[fle, fme]] = _turned_about(lm[f, [fle, fme]], marker[f, 0], lm[f, fal], np.radians(wrong_deg))
         before, settled = frame.copy(), frame.copy()
-        assert not hinge.fill(frame, marker[f], rebuilt).any()  # (rebuilt points are not counted again)
-        priced.fill(settled, marker[f], rebuilt)
+        assert not hinge.fill(frame, marker[f], filled=rebuilt).any()  # (rebuilt points are not counted again)
+        priced.fill(settled, marker[f], filled=rebuilt)
         error_priced.append(np.linalg.norm(settled[[fle, fme]] - lm[f, [fle, fme]], axis=1).max())
         error.append(np.linalg.norm(frame[[fle, fme]] - lm[f, [fle, fme]], axis=1).max())
         given.append(np.linalg.norm(before[[fle, fme]] - lm[f, [fle, fme]], axis=1).max())
@@ -174,7 +177,7 @@ def test_a_knee_rebuilt_from_the_marker_and_the_ankle_alone_gets_its_roll_from_t
     frame[[fle, fme]] += 0.03
     for mask in (rebuilt, np.zeros(len(LANDMARKS), bool)):
         moved = frame.copy()
-        hinge.fill(moved, marker[150], mask)
+        hinge.fill(moved, marker[150], filled=mask)
         assert np.array_equal(moved[[fle, fme]], frame[[fle, fme]])
 
 
@@ -210,10 +213,10 @@ def test_the_vicon_kick_knee_and_ankle_from_the_shank_marker():
     present = [LANDMARKS[i] for i in np.flatnonzero(np.isfinite(lm).all(axis=2).any(axis=0))]
     errors = {}
     for hinge in (True, False):
-        fills = LandmarkFills(True, False, pipe.landmark_map.tracking_of, present)
-        assert fills.leg_hinge is not None
+        fills = LandmarkFills(HipOptions(rebuild=True), MarkerSet(pipe.landmark_map.tracking_of, present))
+        assert [type(fill) for fill in fills.fills] == [SegmentRebuilder, LegHinge]
         if not hinge:
-            fills.leg_hinge = None
+            fills.fills.pop()
         out, filled = fill_take(fills.fill, hidden, tracking=tracking)
         pos = Localizer(profile.body).localize(out, filled).positions
         errors[hinge] = {j: np.linalg.norm(pos[120:, INDEX[j]] - reference[120:, INDEX[j]], axis=1)

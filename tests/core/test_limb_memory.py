@@ -4,6 +4,7 @@ import numpy as np
 from mocap_core.fill_options import FillOptions
 from mocap_core.gapfill import LimbFiller
 from mocap_core.hip_interpolation import HipInterpolator
+from mocap_core.limb_memory import LimbMemory
 from mocap_core.localization import Localizer
 from mocap_core.profiles import LANDMARK_INDEX, load_profile
 from mocap_core.recordings import read_recording
@@ -67,7 +68,7 @@ def run(memory: bool):
             # on its circle: the bone lengths are kept
             assert abs(np.linalg.norm(pos[INDEX["elbow_l"]] - left[0]) - UPPER) < 1e-6
         if memory:
-            own_poses.append(filler.memory.state[2, 0, 0])
+            own_poses.append(filler.get(LimbMemory).state[2, 0, 0])
     return np.array(errors), own_poses
 
 

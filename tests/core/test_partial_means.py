@@ -40,7 +40,7 @@ def test_a_lost_member_moves_with_the_markers_nearest_it_known_answer():
         if f > 0:
             seen[1] = np.nan
         landmarks = _shoulder_map().apply(seen)
-        filled = means.fill(landmarks, seen)
+        filled = means.fill(landmarks, markers=seen)
         assert filled[SAE] == (f > 0)
         np.testing.assert_allclose(landmarks[SAE], 0.5 * (markers[0] + markers[1]), atol=1e-9)
 
@@ -50,14 +50,14 @@ def test_the_turn_leans_on_the_markers_nearest_the_lost_one_known_answer():
     inverse square of its distance from the lost member (geometry.rigid_fit). One of them slides 20 mm: the lost
     back marker keeps its offset from the front one turned by that fit, to 1e-9 m."""
     means = PartialMeans(_shoulder_map())
-    means.fill(_shoulder_map().apply(BODY), BODY.copy())
+    means.fill(_shoulder_map().apply(BODY), markers=BODY.copy())
     turn = axis_angle(np.array([0.0, 0.6, 0.8]), np.radians(40.0))
     moved = BODY @ turn.T + np.array([0.2, 0.1, 0.0])
     moved[5] += [0.02, 0.0, 0.0]  # slid
     seen = moved.copy()
     seen[1] = np.nan
     landmarks = _shoulder_map().apply(seen)
-    means.fill(landmarks, seen)
+    means.fill(landmarks, markers=seen)
     distance = np.linalg.norm(BODY - BODY[1], axis=1)
     nearest = [i for i in np.argsort(distance) if i != 1][:4]
     rot, _ = rigid_fit(BODY[nearest], moved[nearest], 1 / distance[nearest] ** 2)
@@ -82,7 +82,7 @@ def test_with_fewer_than_three_near_markers_seen_the_last_turn_is_kept():
         if f > 15:
             seen[[3, 4, 5]] = np.nan
         landmarks = _shoulder_map().apply(seen)
-        means.fill(landmarks, seen)
+        means.fill(landmarks, markers=seen)
         truth = 0.5 * (markers[0] + markers[1])
         if f > 15:
             kept.append(np.linalg.norm(landmarks[SAE] - truth))
@@ -98,12 +98,12 @@ def test_all_members_lost_or_no_whole_frame_yet_leaves_the_landmark_lost():
     seen = BODY.copy()
     seen[1] = np.nan
     landmarks = _shoulder_map().apply(seen)
-    assert not means.fill(landmarks, seen)[SAE] and np.isnan(landmarks[SAE]).all()  # never whole: nothing to keep
-    means.fill(_shoulder_map().apply(BODY), BODY)
+    assert not means.fill(landmarks, markers=seen)[SAE] and np.isnan(landmarks[SAE]).all()  # never whole: nothing to keep
+    means.fill(_shoulder_map().apply(BODY), markers=BODY)
     seen = BODY.copy()
     seen[[0, 1]] = np.nan
     landmarks = _shoulder_map().apply(seen)
-    assert not means.fill(landmarks, seen)[SAE] and np.isnan(landmarks[SAE]).all()
+    assert not means.fill(landmarks, markers=seen)[SAE] and np.isnan(landmarks[SAE]).all()
 
 
 def test_a_hidden_shoulder_marker_on_a_real_take():
