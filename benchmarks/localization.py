@@ -52,7 +52,7 @@ def main():
         print(f"  profile -> landmarks       {per_call_us(lambda i: lmap.apply(rec.positions[i]), n):7.1f}")
         print(f"  hip interpolation          {per_call_us(lambda i: hips.fill(lm[i][HIP_INDEX]), n):7.1f}")
         guard, copy = PairGuard(), lm.copy()
-        print(f"  pair guard                 {per_call_us(lambda i: guard.fill(copy[i], i / rec.rate_hz), n):7.1f}")
+        print(f"  pair guard                 {per_call_us(lambda i: guard.fill(copy[i], time_s=i / rec.rate_hz), n):7.1f}")
         print(f"  localization, one frame    {per_call_us(lambda i: loc.localize(lm[i]), n):7.1f}  (target <= 50)")
         batch = per_call_us(lambda i: loc.localize(lm), 1) / n
         print(f"  localization, batch of {n}  {batch:7.1f}")
@@ -103,7 +103,7 @@ def leg_hinge_cost():
     # the right knee as the rebuild puts it from the wand and the ankle alone: its roll settled from the hip
     rebuilt = np.zeros(lm.shape[1], bool)
     rebuilt[[LANDMARK_INDEX["R_FLE"], LANDMARK_INDEX["R_FME"]]] = True
-    rolled = per_call_us(lambda i: hinge.fill(lm[300 + i].copy(), tracking[300 + i], rebuilt), 300)
+    rolled = per_call_us(lambda i: hinge.fill(lm[300 + i].copy(), tracking[300 + i], filled=rebuilt), 300)
     print(f"leg hinge (Vicon), us per frame: legs seen {seen:.1f}, one leg's knee and ankle put {filled:.1f}, "
           f"one knee's roll settled {rolled:.1f}")
 
@@ -120,12 +120,12 @@ def pose_memory_cost():
     for f in range(CAPACITY + 100):  # the take's poses, jittered so that every one is kept
         frame = lm[f % len(lm)].copy()
         frame[LANDMARK_INDEX["L_FM2"]] += rng.normal(0, 0.01, 3)
-        memory.fill(frame, None, tracking[f % len(lm)], f / rec.rate_hz)
+        memory.fill(frame, tracking[f % len(lm)], f / rec.rate_hz)
     lost = lm.copy()
     lost[:, [LANDMARK_INDEX["L_FLE"], LANDMARK_INDEX["L_FAL"]]] = np.nan
     n, t0 = 300, (CAPACITY + 100) / rec.rate_hz
-    seen = per_call_us(lambda i: memory.fill(lm[i].copy(), None, tracking[i], t0 + i / rec.rate_hz), n)
-    recalled = per_call_us(lambda i: memory.fill(lost[i].copy(), None, tracking[i], t0 + i / rec.rate_hz), n)
+    seen = per_call_us(lambda i: memory.fill(lm[i].copy(), tracking[i], t0 + i / rec.rate_hz), n)
+    recalled = per_call_us(lambda i: memory.fill(lost[i].copy(), tracking[i], t0 + i / rec.rate_hz), n)
     print(f"pose memory ({CAPACITY} poses a leg), us per frame: legs seen {seen:.1f}, "
           f"one leg's knee and ankle recalled {recalled:.1f}")
 
@@ -141,9 +141,9 @@ def partial_means_cost():
     back = [label.split(":")[-1] for label in rec.labels].index("LBSH")
     lost = rec.positions.copy()
     lost[:, back] = np.nan
-    seen = per_call_us(lambda i: means.fill(lmap.apply(rec.positions[frames[i]]), rec.positions[frames[i]]),
+    seen = per_call_us(lambda i: means.fill(lmap.apply(rec.positions[frames[i]]), markers=rec.positions[frames[i]]),
                        len(frames))
-    kept = per_call_us(lambda i: means.fill(lmap.apply(lost[frames[i]]), lost[frames[i]]), len(frames))
+    kept = per_call_us(lambda i: means.fill(lmap.apply(lost[frames[i]]), markers=lost[frames[i]]), len(frames))
     print(f"partial means (Vicon), us per frame: all seen {seen:.1f}, one shoulder marker lost {kept:.1f} "
           "(the map's own gather included)")
 

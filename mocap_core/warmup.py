@@ -116,7 +116,7 @@ def _warm_rebuild() -> None:
     labels = sorted({n for landmark in profile.landmarks for n in profile.markers_of(landmark)})
     means = PartialMeans(profile.resolve(labels))
     markers = rng.normal(size=(len(labels), 3))
-    means.fill(np.full((len(LANDMARKS), 3), np.nan), markers)
+    means.fill(np.full((len(LANDMARKS), 3), np.nan), markers=markers)
 
 
 def _warm_pose_memory() -> None:  # one call compiles the whole kernel, recall included

@@ -94,3 +94,16 @@ def test_a_change_of_kernel_sources_drops_every_cached_kernel(tmp_path, monkeypa
     assert all(path.exists() for path in caches)
     warmup._drop_stale_caches("sources 2")
     assert not any(path.exists() for path in caches)
+
+
+def test_the_hip_stages_parts_compile_every_kernel_its_fills_run():
+    """In a fresh process: after its parts, each landmark fill's kernel has a compiled signature (a warm-up that
+    calls a fill wrongly leaves its kernel to a node's first frame)."""
+    code = ("from mocap_core import warmup, segment_rebuild, leg_hinge, partial_means, pose_memory, pair_guard\n"
+            "warmup.warm_up(('rebuild', 'pose_memory', 'pair_guard'), stamp=False)\n"
+            "kernels = (segment_rebuild.rebuild_frame, leg_hinge.fill_frame, partial_means._fill_means,\n"
+            "           pose_memory.fill_frame, pair_guard.guard_frame)\n"
+            "print([k.__name__ for k in kernels if not k.signatures])")
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "[]"
