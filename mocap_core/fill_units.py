@@ -74,7 +74,7 @@ class LandmarkFill(Fill):
         return []
 
 
-@dataclass
+@dataclass(slots=True)
 class LimbFrame:
     """One skeleton frame as a limb's fills see it: the whole skeleton's arrays, changed in place, and what the
     fills hand on within the frame."""

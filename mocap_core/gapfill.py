@@ -88,6 +88,9 @@ class LimbFiller:
         self.clock = FrameClock(DEFAULT_FRAME_S)  # the frames' interval, from their times
         made = (fill.for_limb(self, options) for fill in options.fills if fill.wanted(options))
         self.fills: list[LimbFill] = [fill for fill in made if fill is not None]
+        # (the steps each fill takes: a frame calls no method that does nothing)
+        self._before = [fill.before for fill in self.fills if type(fill).before is not LimbFill.before]
+        self._after = [fill.after for fill in self.fills if type(fill).after is not LimbFill.after]
         # what the swivel reads where no fill steers it
         self.no_recall, self.no_model, self.no_weight = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n)
         c = self.constraints  # this limb's limits, gathered once; a chain takes a slice of them
@@ -107,8 +110,8 @@ class LimbFiller:
         idx = self.joints
         frame = LimbFrame(positions, frames, status, np.zeros(4), self.no_recall, self.no_model, self.no_weight)
         af.learn_lengths(positions, status, idx, self.lengths)
-        for fill in self.fills:
-            fill.before(frame)
+        for before in self._before:
+            before(frame)
         # a limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
         # wrist (the hand, never seen, would keep the limb from ever being whole, and so from ever being filled)
         self.seen |= status[idx] == LOCATED
@@ -120,8 +123,8 @@ class LimbFiller:
         _fill_limb(positions, frames, status, *self._chain, self.solver.kernel_id, *self.params, out)
         never = idx[n:]  # joints never located (the carries would hold them from nothing)
         positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
-        for fill in self.fills:
-            fill.after(frame)
+        for after in self._after:
+            after(frame)
         took_us = (time.perf_counter() - t0) * 1e6
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 
