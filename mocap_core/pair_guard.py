@@ -53,8 +53,8 @@ class PairGuard(LandmarkFill):
         A dropped pair not both seen is taken back: the one seen cannot be told wrong."""
         dt = time_s - self.last_time if np.isfinite(time_s - self.last_time) else DEFAULT_FRAME_S
         self.last_time = time_s
-        mask = np.zeros(len(landmarks), np.bool_)
-        guard_frame(landmarks, self.pairs, self.spacing, self.dropped, self.held, self.held_s, self.began, dt, mask)
+        dropped = np.zeros(len(landmarks), np.bool_)
+        guard_frame(landmarks, self.pairs, self.spacing, self.dropped, self.held, self.held_s, self.began, dt, dropped)
         return np.zeros(len(landmarks), np.bool_)
 
     def said(self) -> list[tuple[str, str]]:

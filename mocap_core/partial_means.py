@@ -46,11 +46,11 @@ class PartialMeans(LandmarkFill):
     def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
         """One frame (LandmarkFill.fill): ``landmarks`` from the map and the fills before, its lost ones filled in
         place from ``markers`` (n_labels, 3) as received (None: nothing is)."""
-        filled = np.zeros(len(landmarks), bool)
+        put = np.zeros(len(landmarks), bool)
         if len(self.means) and markers is not None:
             _fill_means(np.asarray(markers, np.float64), landmarks, self.map.idx, self.count, self.means,
-                        self.last_whole, self.turns, filled)
-        return filled
+                        self.last_whole, self.turns, put)
+        return put
 
 
 @njit(cache=True)

@@ -12,16 +12,16 @@ from typing import Iterator
 import numpy as np
 
 from mocap_core.blend import DEFAULT_FRAME_S
+from mocap_core.fill_options import HipOptions
+from mocap_core.fill_units import MarkerSet
 from mocap_core.gapfill import GapFiller
-from mocap_core.presets import PRESETS, Options
 from mocap_core.hip_interpolation import HipInterpolator
 from mocap_core.ik.constraints import Constraints
 from mocap_core.ik.solvers import SolverParams
-from mocap_core.fill_options import HipOptions
-from mocap_core.fill_units import MarkerSet
 from mocap_core.landmark_fills import LandmarkFills, fill_take
 from mocap_core.localization import Localizer
 from mocap_core.marker_gate import MarkerGate
+from mocap_core.presets import PRESETS, Options
 from mocap_core.profiles import Profile
 
 

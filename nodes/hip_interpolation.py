@@ -17,12 +17,12 @@ from pydantic import ConfigDict, Field, model_validator
 
 from messages import FLAG_INTERPOLATED, FLAG_MEASURED, FLAG_MISSING, MarkerFrame
 from mocap_core.fill_options import HipOptions
-from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, HipInterpolator
 from mocap_core.fill_units import MarkerSet
+from mocap_core.hip_interpolation import ANCHOR_INDEX, HIP_INDEX, HipInterpolator
 from mocap_core.landmark_fills import LandmarkFills
+from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.marker_gate import MarkerGate
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
-from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
 from mocap_core.warmup import hip_parts
 from nodes.runtime import Node
