@@ -168,7 +168,9 @@ def shape_turn(first_before, second_before, first, second):
 
 
 @njit(cache=True)
-def _fit_cost(psi, u, e2, radius, to_target, ref, mean, weight, to_recalled, pull):
+def _fit_cost(psi, u, e2, radius, to_target, usual, recall):
+    ref, mean, weight = usual
+    to_recalled, pull = recall
     arm = radius * (math.cos(psi) * u + math.sin(psi) * e2)
     d = to_target - arm
     local = mtv(ref, d / vnorm(d))
@@ -180,25 +182,25 @@ def _fit_cost(psi, u, e2, radius, to_target, ref, mean, weight, to_recalled, pul
 
 
 @njit(cache=True)
-def on_circle_fitting(u, axis, radius, to_target, ref, mean, weight, to_recalled, pull):
+def on_circle_fitting(u, axis, radius, to_target, usual, recall):
     """The direction on the swivel circle (from its centre; ``u`` is the prior, on the circle) at which
-    the bone to the target, in the target joint's frame ``ref``, is nearest its usual direction
-    ``mean``, component by component with ``weight`` (see SD_FLOOR), and the joint nearest the point
-    the limb memory recalled (``to_recalled`` from the centre), with ``pull`` per square metre."""
+    the bone to the target, in the target joint's frame (``usual``: ref, mean, weight), is nearest its usual
+    direction ``mean``, component by component with ``weight`` (see SD_FLOOR), and the joint nearest the point
+    the limb memory recalled (``recall``: to_recalled, from the centre, and pull, per square metre)."""
     if not radius > 1e-6:
         return u
     e2 = vcross(axis, u)
-    best, best_cost = 0.0, _fit_cost(0.0, u, e2, radius, to_target, ref, mean, weight, to_recalled, pull)
+    best, best_cost = 0.0, _fit_cost(0.0, u, e2, radius, to_target, usual, recall)
     step = 2 * math.pi / FIT_STEPS
     for i in range(FIT_STEPS):
         psi = -math.pi + i * step
-        cost = _fit_cost(psi, u, e2, radius, to_target, ref, mean, weight, to_recalled, pull)
+        cost = _fit_cost(psi, u, e2, radius, to_target, usual, recall)
         if cost < best_cost:
             best, best_cost = psi, cost
     centre = best
     for i in range(-20, 21):  # then to a twentieth of a degree
         psi = centre + i * step / 20
-        cost = _fit_cost(psi, u, e2, radius, to_target, ref, mean, weight, to_recalled, pull)
+        cost = _fit_cost(psi, u, e2, radius, to_target, usual, recall)
         if cost < best_cost:
             best, best_cost = psi, cost
     return math.cos(best) * u + math.sin(best) * e2
@@ -216,8 +218,13 @@ def usual_direction(k, dir_sum, dir_sq, dir_n):
 
 
 @njit(cache=True)
-def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, prev_pos, prev_frames,
-              bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths, modelled, model_weight):
+def _fill_run(skeleton, idx, run, parent_now, last, state, steer):
+    """The run (a, k, b): joints k..b-1 lost between the located a and b (swivel_fill says the rest)."""
+    positions, frames, status = skeleton
+    a, k, b = run
+    prev_pos, prev_frames, prev_parent, _, lengths = last
+    bend, bend_ok, dir_sum, dir_sq, dir_n = state
+    recalled, modelled, model_weight = steer
     pa, pk, pb = prev_pos[a], prev_pos[k], prev_pos[b]
     upper, lower = vnorm(pk - pa), vnorm(pb - pk)
     if b == k + 1:  # a lone joint: both its bones as learned
@@ -262,12 +269,23 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
         pull, to_recalled = 1.0 / (MEMORY_SD * MEMORY_SD), recalled[k] - centre
         fit = True
     if fit:
-        u = on_circle_fitting(u, axis, radius, target - centre, ref_now, mean, weight, to_recalled, pull)
+        u = on_circle_fitting(u, axis, radius, target - centre, (ref_now, mean, weight), (to_recalled, pull))
     if b == k + 1 and model_weight[k] > 0 and all_finite(modelled[k]):
         u = _turn_towards(u, axis, modelled[k] - centre, model_weight[k])
-    joint = centre + radius * u
+    _place_run(skeleton, idx, run, parent_now, last, centre + radius * u)
+    return b - k
+
+
+@njit(cache=True)
+def _place_run(skeleton, idx, run, parent_now, last, joint):
+    """The run's first joint at ``joint``; the rest of the run in its last shape, turned with the plane of
+    (a, k, b); their frames turned alike, and a's along its bone to the joint."""
+    positions, frames, status = skeleton
+    a, k, b = run
+    prev_pos, prev_frames, prev_parent = last[0], last[1], last[2]
+    pa, pk, pb = prev_pos[a], prev_pos[k], prev_pos[b]
+    root, target = positions[idx[a]].copy(), positions[idx[b]].copy()
     positions[idx[k]] = joint
-    # the rest of the run: its last shape, turned with the plane of (a, k, b)
     turn = shape_turn(pk - pa, pb - pk, joint - root, target - joint)
     for j in range(k + 1, b):
         positions[idx[j]] = joint + mv(turn, prev_pos[j] - pk)
@@ -280,7 +298,6 @@ def _fill_run(positions, frames, status, idx, a, k, b, parent_now, prev_parent, 
     if not all_finite(like):
         like = mm(mm(parent_now, prev_parent.T.copy()), prev_frames[a])
     frames[idx[a]] = _frame_along(joint - root, like)
-    return b - k
 
 
 @njit(cache=True)
@@ -297,12 +314,16 @@ def _turn_towards(u, axis, to_point, weight):
 
 
 @njit(cache=True)
-def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, prev_parent, bend, bend_ok,
-                dir_sum, dir_sq, dir_n, recalled, lengths, modelled, model_weight):
+def swivel_fill(skeleton, chain, last, state, steer):
     """Fill every run of missing joints that has a located joint on both sides; returns how many.
-    ``recalled``: per chain joint, where the limb memory puts it (NaN: no memory); ``lengths``: the
-    learned bone lengths (learn_lengths); ``modelled``, ``model_weight``: per chain joint, where the body
-    model puts it and how far a lone joint turns towards it on its circle (0: no model)."""
+    ``skeleton``: (positions, frames, status) of the whole skeleton; ``chain``: the limb's (joints, parent);
+    ``last``: its last whole output and learned bone lengths (prev_pos, prev_frames, prev_parent, has_prev,
+    lengths: learn_lengths); ``state``: the swivel's (bend, bend_ok, dir_sum, dir_sq, dir_n); ``steer``:
+    (recalled, modelled, model_weight), per chain joint where the limb memory puts it (NaN: no memory), where
+    the body model puts it and how far a lone joint turns towards it on its circle (0: no model)."""
+    frames, status = skeleton[1], skeleton[2]
+    idx, parent = chain
+    prev_parent = last[2]
     parent_now = frames[parent].copy()
     if not (all_finite(parent_now) and all_finite(prev_parent)):
         return 0
@@ -317,9 +338,7 @@ def swivel_fill(positions, frames, status, idx, parent, prev_pos, prev_frames, p
             b += 1
         if b == n:  # no located joint after the run: Algorithm 1's carry handles it
             break
-        filled += _fill_run(positions, frames, status, idx, k - 1, k, b, parent_now, prev_parent, prev_pos,
-                            prev_frames, bend, bend_ok, dir_sum, dir_sq, dir_n, recalled, lengths, modelled,
-                            model_weight)
+        filled += _fill_run(skeleton, idx, (k - 1, k, b), parent_now, last, state, steer)
         k = b + 1
     return filled
 

@@ -144,6 +144,9 @@ class BlendState:
     frame_s: float = DEFAULT_FRAME_S
     last_time_s: float = float("nan")
 
+    def __post_init__(self):
+        self._memory = tuple(self.memory)  # (as blend_transitions takes it)
+
     @classmethod
     def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0, course: bool = True) -> "BlendState":
         memory = BlendMemory(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
@@ -165,12 +168,12 @@ class BlendState:
     def blend(self, positions, status, idx, frames=None) -> None:
         """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone
         frames, are blended too where given (blend_frames, with the spring's half-life)."""
-        # (the kernels take the arrays one by one: numba reads a tuple of twenty arrays ~5 us slower per call)
+        # (plain tuples: numba reads a NamedTuple of twenty arrays from Python microseconds slower than a tuple)
         m = self.memory
         if frames is not None and self.omega > 0:  # (before blend_transitions, which moves last_status on)
-            blend_frames(frames, status, idx, m.last_status, m.has_last, self.last_frame, self.turn_axis, self.turn,
+            blend_frames(frames, status, idx, m.last_status, m.has_last, (self.last_frame, self.turn_axis, self.turn),
                          self.omega, self.frame_s)
-        blend_transitions(positions, status, idx, *m, self.step, self.omega, self.frame_s, self.course_on)
+        blend_transitions(positions, status, idx, self._memory, self.step, self.omega, self.frame_s, self.course_on)
 
 
 class Blend(LimbFill):
@@ -204,11 +207,13 @@ def spring_step(x, v, omega, dt, decay):
 
 
 @njit(cache=True)
-def blend_frames(frames, status, idx, last_status, has_last, last_frame, turn_axis, turn, omega, dt):
+def blend_frames(frames, status, idx, last_status, has_last, turning, omega, dt):
     """A joint's bone frame that changes source (its or a neighbour's markers lost or back, a fill handed to
     another) goes on from the frame it had, and the turn between the two dies out as a critically damped spring
     (the positions' blend, for the bone frames a rig streams), in place: a wrist handed between sliding markers
-    and a fill can otherwise turn half a turn in a frame."""
+    and a fill can otherwise turn half a turn in a frame. ``turning``: BlendState's (last_frame, turn_axis,
+    turn)."""
+    last_frame, turn_axis, turn = turning
     decay = math.exp(-omega * dt)
     n = idx.shape[0]
     for k in range(n):
@@ -472,9 +477,7 @@ def _linear_return(p, s, was, last, offset, step):
 
 
 @njit(cache=True)
-def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status,
-                      has_last, offset, offset_vel, course, course_step, since_loss, eased, trust, prev_raw, prev_vel,
-                      course_len, held_course, course_base, step, omega, dt, course_on):
+def blend_transitions(positions, status, idx, memory, step, omega, dt, course_on):
     """Meet a joint's change of source without a twitch (inertialization, as game engines do), in place.
 
     With ``omega`` 0 (reacquire_step_m alone): when a joint's markers come back, start where the estimate
@@ -485,10 +488,10 @@ def blend_transitions(positions, status, idx, last_out, out_step, last_raw, raw_
     (0 markers, 1 a fill) and frames since; ``course``, ``course_step``, ``since_loss`` and ``eased``, the
     markers' course after a loss and how far the output has left it; ``course_len``, a lone joint's distances to
     its neighbours where the course began; ``held_course``, whether it began at a hold; ``course_base``, the
-    parent's step that the course's step carries."""
-    mem = BlendMemory(last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last, offset,
-                      offset_vel, course, course_step, since_loss, eased, trust, prev_raw, prev_vel, course_len,
-                      held_course, course_base)
+    parent's step that the course's step carries (BlendMemory's fields, given as a plain tuple)."""
+    mem = BlendMemory(*memory)
+    (last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last, offset, offset_vel, course,
+     course_step, since_loss, eased, trust, prev_raw, prev_vel, course_len, held_course, course_base) = memory
     cfg = BlendSettings(step, omega, dt, course_on)
     n = idx.shape[0]
     decay = math.exp(-omega * dt)

@@ -73,10 +73,12 @@ class BodyModel:
         self.fitted_at = -1.0
         self.last_local = np.full(3, np.nan)  # the point of the frame before, while the joint is lost
         self.mu = self.sd = self.coef = self.chol = self.y_mean = None
+        # (as the kernels take them)
+        self._layout = (self.k, self.root, self.with_next, self.parent, self.features)
+        self._sums = (self.n, self.sx, self.sy, self.sxx, self.sxy)
 
     def learn(self, positions, frames, status) -> None:
-        _learn(positions, frames, status, self.idx, self.other, self.k, self.root, self.with_next, self.parent,
-               self.features, self.x, self.n, self.sx, self.sy, self.sxx, self.sxy)
+        _learn((positions, frames, status), self.idx, self.other, self._layout, self.x, self._sums)
 
     def lost(self, status) -> bool:
         """Whether this frame asks the model: its joint missing; as the middle joint, both neighbours not;
@@ -102,8 +104,7 @@ class BodyModel:
             return none
         if self.n[0] - self.fitted_at >= REFIT_SAMPLES or self.fitted_at < 0:
             self._fit()
-        if not _features(positions, frames, status, idx, k, self.root, self.with_next, self.parent, self.features,
-                         False, self.mu, self.x):
+        if not _features((positions, frames, status), idx, self._layout, False, self.mu, self.x):
             return none
         leverage = _predict(self.x, self.mu, self.sd, self.chol, self.coef, self.y_mean, self.local)
         _cap_step(self.local, self.last_local, MAX_SPEED_M_S * frame_s)
@@ -229,12 +230,15 @@ def _predict(x, mu, sd, chol, coef, y_mean, local):
 
 
 @njit(cache=True)
-def _features(positions, frames, status, chain, k, root_k, with_next, parent, features, mirrored, fallback, x):
+def _features(skeleton, chain, layout, mirrored, fallback, x):
     """This frame's feature vector into x, from ``chain``'s view (mirrored: the other limb's, as if it
     were this one): the feature joints from the chain's ``root_k`` joint, and with ``with_next`` the y and z
     axes of the joint after ``k``. Joints that are not located take ``fallback`` (the model's means), or,
     without one, make the frame unusable. False when the frame has no usable reference. (Written out
-    without temporaries: it runs twice a frame per limb.)"""
+    without temporaries: it runs twice a frame per limb.) ``skeleton``: (positions, frames, status);
+    ``layout``: BodyModel's (k, root_k, with_next, parent, features)."""
+    positions, frames, status = skeleton
+    k, root_k, with_next, parent, features = layout
     ref = frames[parent]
     root = positions[chain[root_k]]
     if not (all_finite(ref) and all_finite(root)):
@@ -262,13 +266,17 @@ def _features(positions, frames, status, chain, k, root_k, with_next, parent, fe
 
 
 @njit(cache=True)
-def _learn(positions, frames, status, idx, other, k, root_k, with_next, parent, features, x, n, sx, sy, sxx, sxy):
+def _learn(skeleton, idx, other, layout, x, sums):
+    """Add this frame's poses of the limb and of the other, mirrored, to ``sums`` (n, sx, sy, sxx, sxy)."""
+    positions, frames, status = skeleton
+    k, root_k, with_next, parent, _ = layout
+    n, sx, sy, sxx, sxy = sums
     for src in range(2):
         chain = idx if src == 0 else other
         if status[chain[root_k]] != LOCATED or status[chain[k]] != LOCATED or \
                 (with_next and status[chain[k + 1]] != LOCATED):
             continue
-        if not _features(positions, frames, status, chain, k, root_k, with_next, parent, features, src == 1, None, x):
+        if not _features(skeleton, chain, layout, src == 1, None, x):
             continue
         y = mtv(frames[parent].copy(), positions[chain[k]] - positions[chain[root_k]])
         if not all_finite(y):  # a "located" joint without a position: one NaN would spoil the sums for good

@@ -68,6 +68,7 @@ class LimbFiller:
         self.limb = limb
         self.solver = get_solver(solver) if isinstance(solver, str) else solver
         self.params = (params or SolverParams()).typed()
+        self._params = tuple(self.params)  # (as the kernel takes it)
         self.constraints = constraints or load_constraints()
         self.joints = np.array([INDEX[j] for j in LIMBS[limb]], dtype=np.int64)
         self.parent_of_root = INDEX[PARENT[LIMBS[limb][0]]]
@@ -82,6 +83,9 @@ class LimbFiller:
         # (sum, count). The IK chains and the swivel keep them (the thesis's rigid bones): the last whole frame's
         # would keep its marker noise, and the stretch of a limb that straightened past its reach, the whole gap.
         self.lengths = np.zeros((n, 2))
+        # (the chain and that state as the fills' kernels take them)
+        self.chain = (self.joints, self.parent_of_root)
+        self.last = (self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, self.lengths)
         self.seen = np.zeros(n, bool)    # joints located at least once
         self.chain_end = n               # the limb's joints up to its last one ever located
         self._chain = None               # and what the kernel takes of them (_chain_up_to)
@@ -120,7 +124,7 @@ class LimbFiller:
             self.chain_end, self.has_prev[0] = n, False        # only once it is seen
             self._chain = self._chain_up_to(n)
         out = frame.out
-        _fill_limb(positions, frames, status, *self._chain, self.solver.kernel_id, *self.params, out)
+        _fill_limb((positions, frames, status), *self._chain, self.solver.kernel_id, self._params, out)
         never = idx[n:]  # joints never located (the carries would hold them from nothing)
         positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
         for after in self._after:
@@ -129,13 +133,13 @@ class LimbFiller:
         return FillStats(int(out[0]), int(out[1]), int(out[2]), float(out[3]), took_us if out[0] else 0.0)
 
     def _chain_up_to(self, n: int) -> tuple:
-        """What Algorithm 1 takes of the limb's first n joints: the chain, views of its state (which the kernel
-        updates) and its limits. One by one, not as tuples: numba reads a tuple of arrays microseconds slower
-        a call, and this runs for every limb of every frame."""
+        """What Algorithm 1 takes of the limb's first n joints: the chain, views of its last output and learned
+        lengths (which the kernel updates) and its limits, as plain tuples (numba reads a NamedTuple from Python
+        about a microsecond slower a call, and this runs for every limb of every frame)."""
         lim = self.limits
-        return (self.joints[:n], self.parent_of_root, self.limb.endswith("arm"), self.prev_pos[:n],
-                self.prev_frames[:n], self.prev_parent_frame, self.has_prev, self.lengths, lim.pp[:n], lim.cones[:n],
-                lim.has_cone[:n], lim.twists[:n], lim.has_twist[:n])
+        return ((self.joints[:n], self.parent_of_root, self.limb.endswith("arm")),
+                (self.prev_pos[:n], self.prev_frames[:n], self.prev_parent_frame, self.has_prev, self.lengths),
+                (lim.pp[:n], lim.cones[:n], lim.has_cone[:n], lim.twists[:n], lim.has_twist[:n]))
 
 
 @njit(cache=True)
@@ -152,11 +156,15 @@ def _rigid_chain(prev_pos, lengths, root, m):
 
 
 @njit(cache=True)
-def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_frames, prev_parent, has_prev,
-               lengths, pp, cones, has_cone, twists, has_twist, solver, max_iterations, stop_distance_m, constraints,
-               escape_step_deg, escape_max_deg, out):
-    """Algorithm 1 for one limb, in place. out = [estimated, held, iterations, max residual m]."""
-    params = SolverParams(max_iterations, stop_distance_m, constraints, escape_step_deg, escape_max_deg)
+def _fill_limb(skeleton, chain, last, limits, solver, params, out):
+    """Algorithm 1 for one limb, in place: every run of missing joints after a located one. ``skeleton``:
+    (positions, frames, status) of the whole skeleton; ``chain``: the limb's (joints, parent, is_arm); ``last``:
+    its last whole output (prev_pos, prev_frames, prev_parent, has_prev) and learned bone lengths; ``limits``:
+    its bones' (pp, cones, has_cone, twists, has_twist); ``solver``: its place in SOLVERS; ``params``:
+    SolverParams as a plain tuple. out = [estimated, held, iterations, max residual m]."""
+    positions, frames, status = skeleton
+    idx, parent, is_arm = chain
+    has_prev = last[3]
     n = idx.shape[0]
     parent_frame = frames[parent].copy()
     if status[idx[0]] == MISSING and is_arm and status[parent] != MISSING:
@@ -165,69 +173,91 @@ def _fill_limb(positions, frames, status, idx, parent, is_arm, prev_pos, prev_fr
         status[idx[0]] = ESTIMATED
     parent_ok = all_finite(parent_frame)
     if has_prev[0] and parent_ok and status[idx[0]] != MISSING:
+        how = (solver, SolverParams(*params))
         i = 1
         while i < n:
             if status[idx[i]] != MISSING:
                 i += 1
                 continue
-            root, t = i - 1, i
+            t = i
             while t < n and status[idx[t]] == MISSING:
                 t += 1
-            last = t if t < n else n - 1
-            m = last - root  # bones in the chain
-            # the previous chain from root to target (or to the limb's end), moved onto the current root, each
-            # bone at its learned length: the chain's last bone would otherwise carry each frame's residual
-            # into the next frame's start, and stretch frame after frame
-            prev = _rigid_chain(prev_pos, lengths, root, m)
-            P = np.empty((m + 1, 3))
-            for k in range(m + 1):
-                P[k] = prev[k] - prev[0] + positions[idx[root]]
-            R = prev_frames[root:last].copy()
-            ref0 = parent_frame if root == 0 else frames[idx[root - 1]].copy()
-            if not all_finite(ref0):
-                ref0 = parent_frame
-            if t < n:
-                target = positions[idx[t]].astype(np.float64)
-                run = ChainLimits(ref0, pp[root:last], cones[root:last], has_cone[root:last], twists[root:last],
-                                  has_twist[root:last])
-                it, res = solve(solver, P, R, target, run, params)
-                out[2] += it
-                out[3] = max(out[3], res)
-                first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position, if reached
-                if res > params.stop_distance_m:
-                    # out of the rigid chain's reach: the target and the joints after it hang at the chain's end,
-                    # as they are, so no bone stretches (the thesis's C# code keeps every bone's length too)
-                    shift = P[m] - target
-                    for k in range(t, n):
-                        positions[idx[k]] = positions[idx[k]] + shift
-                    status[idx[t]] = ESTIMATED
-            else:
-                # no target: keep the last rotation relative to the parent (a rigid carry)
-                turn = mm(parent_frame, prev_parent.T.copy())
-                for k in range(m + 1):
-                    P[k] = positions[idx[root]] + mv(turn, prev[k] - prev[0])
-                for k in range(m):
-                    R[k] = mm(turn, prev_frames[root + k])
-                frames[idx[last]] = mm(turn, prev_frames[last])
-                first, stop, code = 1, m + 1, HELD
-            for k in range(first, stop):
-                positions[idx[root + k]] = P[k]
-                status[idx[root + k]] = code
-                out[0 if code == ESTIMATED else 1] += 1
-            for k in range(m):
-                frames[idx[root + k]] = R[k]
+            _fill_gap(skeleton, idx, last, limits, parent_frame, (i - 1, t), how, out)
             i = t + 1
-    # remember this frame's limb as the next frame's starting chain, if it is whole
-    whole = parent_ok
+    if parent_ok:
+        _remember(skeleton, idx, last, parent_frame)
+
+
+@njit(cache=True)
+def _fill_gap(skeleton, idx, last, limits, parent_frame, run, how, out):
+    """One run of missing joints: from ``run`` = (root, t), root located and t the next located joint (the
+    limb's length: none). ``how``: (solver, SolverParams)."""
+    positions, frames, status = skeleton
+    prev_pos, prev_frames, prev_parent, _, lengths = last
+    pp, cones, has_cone, twists, has_twist = limits
+    root, t = run
+    solver, params = how
+    n = idx.shape[0]
+    last_k = t if t < n else n - 1
+    m = last_k - root  # bones in the chain
+    # the previous chain from root to target (or to the limb's end), moved onto the current root, each
+    # bone at its learned length: the chain's last bone would otherwise carry each frame's residual
+    # into the next frame's start, and stretch frame after frame
+    prev = _rigid_chain(prev_pos, lengths, root, m)
+    P = np.empty((m + 1, 3))
+    for k in range(m + 1):
+        P[k] = prev[k] - prev[0] + positions[idx[root]]
+    R = prev_frames[root:last_k].copy()
+    ref0 = parent_frame if root == 0 else frames[idx[root - 1]].copy()
+    if not all_finite(ref0):
+        ref0 = parent_frame
+    if t < n:
+        target = positions[idx[t]].astype(np.float64)
+        chain_limits = ChainLimits(ref0, pp[root:last_k], cones[root:last_k], has_cone[root:last_k],
+                                   twists[root:last_k], has_twist[root:last_k])
+        it, res = solve(solver, P, R, target, chain_limits, params)
+        out[2] += it
+        out[3] = max(out[3], res)
+        first, stop, code = 1, m, ESTIMATED     # the target keeps its measured position, if reached
+        if res > params.stop_distance_m:
+            # out of the rigid chain's reach: the target and the joints after it hang at the chain's end,
+            # as they are, so no bone stretches (the thesis's C# code keeps every bone's length too)
+            shift = P[m] - target
+            for k in range(t, n):
+                positions[idx[k]] = positions[idx[k]] + shift
+            status[idx[t]] = ESTIMATED
+    else:
+        # no target: keep the last rotation relative to the parent (a rigid carry)
+        turn = mm(parent_frame, prev_parent.T.copy())
+        for k in range(m + 1):
+            P[k] = positions[idx[root]] + mv(turn, prev[k] - prev[0])
+        for k in range(m):
+            R[k] = mm(turn, prev_frames[root + k])
+        frames[idx[last_k]] = mm(turn, prev_frames[last_k])
+        first, stop, code = 1, m + 1, HELD
+    for k in range(first, stop):
+        positions[idx[root + k]] = P[k]
+        status[idx[root + k]] = code
+        out[0 if code == ESTIMATED else 1] += 1
+    for k in range(m):
+        frames[idx[root + k]] = R[k]
+
+
+@njit(cache=True)
+def _remember(skeleton, idx, last, parent_frame):
+    """This frame's limb as the next frame's starting chain, if it is whole."""
+    positions, frames = skeleton[0], skeleton[1]
+    prev_pos, prev_frames, prev_parent, has_prev = last[0], last[1], last[2], last[3]
+    n = idx.shape[0]
     for k in range(n):
-        whole = whole and all_finite(positions[idx[k]])
-    if whole:
-        for k in range(n):
-            prev_pos[k] = positions[idx[k]]
-            if all_finite(frames[idx[k]]) or not has_prev[0]:
-                prev_frames[k] = frames[idx[k]]  # an end joint without a frame keeps its previous one
-        prev_parent[:] = parent_frame
-        has_prev[0] = True
+        if not all_finite(positions[idx[k]]):
+            return
+    for k in range(n):
+        prev_pos[k] = positions[idx[k]]
+        if all_finite(frames[idx[k]]) or not has_prev[0]:
+            prev_frames[k] = frames[idx[k]]  # an end joint without a frame keeps its previous one
+    prev_parent[:] = parent_frame
+    has_prev[0] = True
 
 
 class GapFiller:

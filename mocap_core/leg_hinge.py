@@ -92,6 +92,9 @@ class LegHinge(LandmarkFill):
         self.lost_frames = np.zeros(2, np.int64)       # and for how many frames it has been lost
         self.clock = FrameClock(1 / 120)               # (the frames' interval, from their times)
         self.active = bool((self.legs[:, -1] >= 0).any())  # False: no shank marker, nothing to fill from
+        # (as the kernel takes them)
+        self._layout = (self.legs, self.shank_markers)
+        self._state = (self.shape, self.turn, self.bend, self.course, self.lost_frames, self.hip_distance)
 
     def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
         """One frame (LandmarkFill.fill), in place. ``filled``: what the segment rebuild put this frame (their roll
@@ -104,15 +107,18 @@ class LegHinge(LandmarkFill):
         rebuilt = np.zeros(len(landmarks), np.bool_) if filled is None else filled
         tracking = np.asarray(tracking, np.float64)
         self.clock.advance(float(time_s))
-        fill_frame(landmarks, tracking, rebuilt, self.legs, self.shank_markers, self.shape, self.turn, self.bend,
-                   self.course, self.lost_frames, self.clock.frames(COURSE_S), self.hip_distance, self.roll_price, out)
+        fill_frame(landmarks, tracking, rebuilt, self._layout, self._state, self.clock.frames(COURSE_S),
+                   self.roll_price, out)
         return out
 
 
 @njit(cache=True)
-def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price, left_hip, right_hip):
+def settle_roll(lm, tracking, rebuilt, layout, hip_distance, price, hips):
     """Learn the epicondyles' distances from the hip centre where they are seen; where the rebuild put them
-    from the shank marker and the ankle alone, turn them about that line to keep those distances."""
+    from the shank marker and the ankle alone, turn them about that line to keep those distances. ``layout``:
+    LegHinge's (legs, shank_markers); ``hips``: this frame's (left, right) hip centres."""
+    legs, shank_markers = layout
+    left_hip, right_hip = hips
     points, hip_only = np.empty((2, 3)), np.empty((1, 3))
     for leg in range(2):
         hip = left_hip if leg == 0 else right_hip
@@ -146,10 +152,12 @@ def settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, price,
 
 
 @njit(cache=True)
-def fill_frame(lm, tracking, rebuilt, legs, shank_markers, shape, turn, bend, course, lost_frames, course_frames,
-               hip_distance, roll_price, out):
+def fill_frame(lm, tracking, rebuilt, layout, state, course_frames, roll_price, out):
+    """One frame, in place (LegHinge.fill); ``layout`` and ``state``: LegHinge's arrays, as plain tuples."""
+    legs = layout[0]
+    shape, turn, bend, course, lost_frames, hip_distance = state
     pelvis, left_hip, right_hip = hip_centres(lm)
-    settle_roll(lm, tracking, rebuilt, legs, shank_markers, hip_distance, roll_price, left_hip, right_hip)
+    settle_roll(lm, tracking, rebuilt, layout, hip_distance, roll_price, (left_hip, right_hip))
     now = np.empty((6, 3))
     for leg in range(2):
         if legs[leg, 4] < 0:

@@ -49,17 +49,22 @@ class LimbMemory(LimbFill):
         self.state = np.zeros((n, 2, 2), np.int64)         # poses kept, where the next one goes
         self.last = np.full((n, 2, 3), np.inf)             # the last key kept
         self.pred = np.full((n, 3), np.nan)                # this frame's recalled positions (world)
+        self._rings = (self.keys, self.vals, self.state, self.last)  # (as the kernels take them)
 
     def before(self, frame: LimbFrame) -> None:
         """Learn this frame's pose, and hand the swivel where the poses learned put the lost joints."""
-        p, f, s, idx, parent = frame.positions, frame.frames, frame.status, self.limb.joints, self.limb.parent_of_root
-        _learn(p, f, s, idx, self.other, parent, self.keys, self.vals, self.state, self.last)
-        _recall(p, f, s, idx, parent, self.keys, self.vals, self.state, self.pred)
+        skeleton, idx, parent = (frame.positions, frame.frames, frame.status), self.limb.joints, self.limb.parent_of_root
+        _learn(skeleton, idx, self.other, parent, self._rings)
+        _recall(skeleton, idx, parent, self._rings, self.pred)
         frame.recalled = self.pred
 
 
 @njit(cache=True)
-def _learn(positions, frames, status, idx, other, parent, keys, vals, state, last):
+def _learn(skeleton, idx, other, parent, rings):
+    """Keep this frame's pose of the chain ``idx`` (and of ``other``, mirrored) in ``rings`` (keys, vals, state,
+    last). ``skeleton``: (positions, frames, status) of the whole skeleton."""
+    positions, frames, status = skeleton
+    keys, vals, state, last = rings
     ref = frames[parent].copy()
     if not all_finite(ref):
         return
@@ -80,7 +85,10 @@ def _learn(positions, frames, status, idx, other, parent, keys, vals, state, las
 
 
 @njit(cache=True)
-def _recall(positions, frames, status, idx, parent, keys, vals, state, pred):
+def _recall(skeleton, idx, parent, rings, pred):
+    """Where the poses kept put each lone missing joint, into ``pred`` (NaN: no say)."""
+    positions, frames, status = skeleton
+    keys, vals, state, _ = rings
     pred[:] = np.nan
     ref = frames[parent].copy()
     if not all_finite(ref):

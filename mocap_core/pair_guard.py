@@ -47,6 +47,7 @@ class PairGuard(LandmarkFill):
         self.held_s = np.zeros(len(PAIRS))          # this long
         self.began = np.zeros(len(PAIRS), np.bool_)  # which the last frame began to drop
         self.last_time = np.nan
+        self._state = (self.spacing, self.dropped, self.held, self.held_s, self.began)  # (what the kernel keeps)
 
     def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
         """One frame (LandmarkFill.fill), in place: the dropped pairs set to NaN; it puts nothing (an empty mask).
@@ -54,7 +55,7 @@ class PairGuard(LandmarkFill):
         dt = time_s - self.last_time if np.isfinite(time_s - self.last_time) else DEFAULT_FRAME_S
         self.last_time = time_s
         dropped = np.zeros(len(landmarks), np.bool_)
-        guard_frame(landmarks, self.pairs, self.spacing, self.dropped, self.held, self.held_s, self.began, dt, dropped)
+        guard_frame(landmarks, self.pairs, self._state, dt, dropped)
         return np.zeros(len(landmarks), np.bool_)
 
     def said(self) -> list[tuple[str, str]]:
@@ -65,7 +66,10 @@ class PairGuard(LandmarkFill):
 
 
 @njit(cache=True)
-def guard_frame(lm, pairs, spacing, dropped, held, held_s, began, dt, mask):
+def guard_frame(lm, pairs, state, dt, mask):
+    """One frame of landmarks, in place; ``state``: PairGuard's arrays, in place too (a plain tuple: numba reads it
+    from Python in a fraction of a microsecond, a NamedTuple in about one)."""
+    spacing, dropped, held, held_s, began = state
     for p in range(len(pairs)):
         a, b = pairs[p, 0], pairs[p, 1]
         now = vnorm(lm[a] - lm[b])  # NaN: one lost

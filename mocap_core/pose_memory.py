@@ -110,6 +110,8 @@ REACH_GROWTH_M = 0.005
 MAX_STEP_S = 0.1  # frames further apart than this give no velocity (the last one is kept)
 SACR, L_IAS, R_IAS = LANDMARK_INDEX["SACR"], LANDMARK_INDEX["L_IAS"], LANDMARK_INDEX["R_IAS"]
 L_TOE = LANDMARK_INDEX[f"L_{KEY}"]
+FLIP = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
+FLIP_KEY = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0])  # a pose key: the toe and its velocity
 
 
 class PoseMemory(LandmarkFill):
@@ -165,6 +167,10 @@ class PoseMemory(LandmarkFill):
         self._no_tracking, self._no_foot = np.zeros((0, 3)), np.full_like(self.foot, -1)
         self.pelvis_axes = np.zeros((3, 3))                  # the tracked pelvis frame (track_pelvis): its axes,
         self.pelvis_motion = np.zeros((4, 3))                # origin, step, turn per frame, and tracking or not
+        # (as the kernel takes them)
+        self._memory = (self.keys, self.offsets, self.state, self.last_kept)
+        self._state = (self.last_seen, self.estimate, self.pelvis_axes, self.pelvis_motion, self.foot_width,
+                       self.foot_sound, self.reach, self.toe_motion)
 
     def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
         """One frame (LandmarkFill.fill), in place. ``time_s`` NaN: the poses are found by the toe's place
@@ -182,10 +188,8 @@ class PoseMemory(LandmarkFill):
             tracking, foot = np.asarray(tracking, np.float64), self.foot
         if len(self.legs):
             self.clock.advance(float(time_s))
-            fill_frame(landmarks, filled, self.legs, self.mirror, self.toe_share, self.keys, self.offsets, self.state,
-                       self.last_kept, self.last_seen, self.estimate, out, self.pelvis_axes, self.pelvis_motion,
-                       tracking, foot, self.foot_width, self.foot_sound, self.clock.frames(FOOT_SOUND_S), self.reach,
-                       self.toe_motion, float(time_s))
+            fill_frame((landmarks, filled, tracking, float(time_s)), (self.legs, self.mirror, self.toe_share, foot),
+                       self._memory, self._state, self.clock.frames(FOOT_SOUND_S), out)
         return out
 
 
@@ -260,9 +264,9 @@ def toe_velocity(motion, toe, time_s):
 
 
 @njit(cache=True)
-def recall(keys, offsets, state, point, source, line, share, nt, width):
-    """The targets' offsets (nt, 3) where the NEIGHBOURS poses of one leg's memory (``keys``, ``offsets``,
-    ``state``: its own [0] and the other leg's [1]) whose key is nearest ``point`` had them, less each
+def recall(memory, point, source, line, share, nt, width):
+    """The targets' offsets (nt, 3) where the NEIGHBOURS poses of one leg's ``memory`` ((keys, offsets,
+    state): its own [0] and the other leg's [1]) whose key is nearest ``point`` had them, less each
     target's ``share`` of its toe; a target kept as far from the toe as it was (share 1) turned as the foot's
     ``line`` has turned since, when both are known. ``point``: the toe (3: the keys' first three numbers are
     compared), or the toe and its velocity (6). ``source``: the memory searched, the leg's own (0) or the
@@ -270,6 +274,7 @@ def recall(keys, offsets, state, point, source, line, share, nt, width):
     one of the other leg's is nearer.
     Each offset is the local fit's (remembered_poses.local_fit) at the toe's place. Also returns how far the
     poses' offsets spread about their weighted mean (nt: the weighted variance, m^2), and the memory searched."""
+    keys, offsets, state = memory
     best_d, best_i = np.full(NEIGHBOURS, np.inf), np.empty(NEIGHBOURS, np.int64)
     nearest(keys[max(source, 0)], state[max(source, 0), 0], point, best_d, best_i)
     if source < 0:
@@ -325,80 +330,105 @@ def within_reach(point, toe, hip, reach):
 
 
 @njit(cache=True)
-def fill_frame(lm, filled, legs, mirror, toe_share, keys, offsets, state, last_kept, last_seen, estimate, out,
-               pelvis_axes, pelvis_motion, tracking, foot, foot_width, foot_sound, sound_frames, reach, toe_motion,
-               time_s):
+def fill_frame(frame, layout, memory, state, sound_frames, out):
+    """One frame, in place (PoseMemory.fill), as plain tuples: ``frame`` (lm, filled, tracking, time_s); ``layout``
+    (legs, mirror, toe_share, foot); ``memory`` (keys, offsets, state, last_kept); ``state`` (last_seen, estimate,
+    pelvis_axes, pelvis_motion, foot_width, foot_sound, reach, toe_motion). ``out``: the landmarks put."""
+    lm, legs, pelvis_axes, pelvis_motion = frame[0], layout[0], state[2], state[3]
     origin, rot = np.empty(3), np.empty((3, 3))
     if not pelvis_frame(lm, origin, rot):
         pelvis_motion[TRACKING, 0] = 0.0
         return
     track_pelvis(origin, rot, pelvis_axes, pelvis_motion)
     _, left_hip, right_hip = hip_centres(lm)
-    flip = np.array([-1.0, 1.0, 1.0])  # mirrored across the body (the pelvis frame's x)
-    flip_key = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0])
-    pose_key = np.empty(6)
-    width = legs.shape[1] - 3
-    seen = np.zeros((width + 1, 3))  # the targets, then the foot's line
+    seen = np.zeros((legs.shape[1] - 2, 3))  # the targets, then the foot's line (one buffer for both legs)
     for g in range(legs.shape[0]):
-        key, heel, nt = legs[g, 0], legs[g, 1], legs[g, 2]
-        hip = left_hip if key == L_TOE else right_hip
-        toe = lm[key].copy()
-        if not vfinite(toe):
-            estimate[g, 0, 0] = np.nan
-            toe_motion[g, 0, 0] = np.nan
-            continue
-        local_toe = mtv(rot, toe - origin)
-        toe_velocity(toe_motion[g], local_toe, time_s)
-        pose_key[:3], pose_key[3:] = local_toe, VELOCITY_S * toe_motion[g, 1]
-        line, spacing = foot_line(tracking, foot[g], rot, foot_width[g])
-        foot_sound[g] = foot_sound[g] + 1 if spacing == spacing else 0
-        line = line if foot_sound[g] >= sound_frames else np.zeros(3)
-        lost, measured = False, not filled[key]
-        for t in range(nt):
-            lost = lost or not vfinite(lm[legs[g, 3 + t]])
-            measured = measured and not filled[legs[g, 3 + t]]
-        if not lost or vfinite(lm[heel]):  # seen whole, or the foot is tracked (segment carry)
-            estimate[g, 0, 0] = np.nan
-            if not lost and measured:
-                for t in range(nt):
-                    seen[t] = mtv(rot, lm[legs[g, 3 + t]] - origin)
-                    last_seen[g, t] = seen[t] - toe_share[g, t] * local_toe
-                seen[width] = line
-                if spacing == spacing:
-                    foot_width[g] = follow(foot_width[g], spacing, FOOT_WIDTH_RATE)
-                keep(keys[g, 0], offsets[g, 0], state[g, 0], last_kept[g, 0], pose_key, seen)
-                for t in range(nt):
-                    if toe_share[g, t] == 1.0:  # (an ankle: how far the leg reaches, for either leg)
-                        far = vnorm(lm[legs[g, 3 + t]] - hip)
-                        reach[g] = grown_reach(reach[g], far)
-                        if mirror[g] >= 0:
-                            reach[mirror[g]] = grown_reach(reach[mirror[g]], far)
-                other = mirror[g]
-                if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
-                    keep(keys[other, 1], offsets[other, 1], state[other, 1], last_kept[other, 1],
-                          pose_key * flip_key, seen * flip)
-            continue
-        if state[g, 0, 0] < NEIGHBOURS:
-            continue
-        # the poses found by the toe's place, and by its place and velocity (VELOCITY_S), in the same memory: each
-        # target from both, weighted by how closely each search's poses agree
-        mean, place_spread, source = recall(keys[g], offsets[g], state[g], local_toe, -1 if mirror[g] >= 0 else 0,
-                                            line, toe_share[g], nt, width)
-        by_motion, motion_spread, _ = recall(keys[g], offsets[g], state[g], pose_key, source, line, toe_share[g],
-                                             nt, width)
-        for t in range(nt):
-            w = place_spread[t] / (place_spread[t] + motion_spread[t])
-            mean[t] = w * by_motion[t] + (1.0 - w) * mean[t]
-        if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps
-            if np.isnan(last_seen[g, 0, 0]):
-                estimate[g, :nt] = mean
-            else:
-                estimate[g, :nt] = last_seen[g, :nt]
-        estimate[g, :nt] += SMOOTHING * (mean - estimate[g, :nt])
-        for t in range(nt):
-            k = legs[g, 3 + t]
-            if not vfinite(lm[k]):
-                lm[k] = origin + mv(rot, estimate[g, t] + toe_share[g, t] * local_toe)
-                if toe_share[g, t] == 1.0 and reach[g] > 0.0:
-                    lm[k] = within_reach(lm[k], toe, hip, reach[g])
-                out[k] = True
+        hip = left_hip if legs[g, 0] == L_TOE else right_hip
+        _fill_leg(g, frame, layout, memory, state, (origin, rot, hip, seen), sound_frames, out)
+
+
+@njit(cache=True, inline="always")
+def _fill_leg(g, frame, layout, memory, state, pelvis, sound_frames, out):
+    """Leg ``g``: learn its pose where it is seen whole; else put its lost targets where the poses learned had
+    them. ``pelvis``: (origin, axes, this leg's hip centre, a buffer for the pose)."""
+    lm, filled, tracking, time_s = frame
+    legs, mirror, toe_share, foot = layout
+    keys, offsets, kept, _ = memory
+    last_seen, estimate, _, _, foot_width, foot_sound, reach, toe_motion = state
+    origin, rot, hip, _ = pelvis
+    key, heel, nt = legs[g, 0], legs[g, 1], legs[g, 2]
+    width = legs.shape[1] - 3
+    toe = lm[key].copy()
+    if not vfinite(toe):
+        estimate[g, 0, 0] = np.nan
+        toe_motion[g, 0, 0] = np.nan
+        return
+    local_toe = mtv(rot, toe - origin)
+    toe_velocity(toe_motion[g], local_toe, time_s)
+    pose_key = np.empty(6)
+    pose_key[:3], pose_key[3:] = local_toe, VELOCITY_S * toe_motion[g, 1]
+    line, spacing = foot_line(tracking, foot[g], rot, foot_width[g])
+    foot_sound[g] = foot_sound[g] + 1 if spacing == spacing else 0
+    line = line if foot_sound[g] >= sound_frames else np.zeros(3)
+    lost, measured = False, not filled[key]
+    for t in range(nt):
+        lost = lost or not vfinite(lm[legs[g, 3 + t]])
+        measured = measured and not filled[legs[g, 3 + t]]
+    if not lost or vfinite(lm[heel]):  # seen whole, or the foot is tracked (segment carry)
+        estimate[g, 0, 0] = np.nan
+        if not lost and measured:
+            _keep_pose(g, lm, layout, memory, state, pelvis, (local_toe, pose_key, line))
+            if spacing == spacing:
+                foot_width[g] = follow(foot_width[g], spacing, FOOT_WIDTH_RATE)
+        return
+    if kept[g, 0, 0] < NEIGHBOURS:
+        return
+    # the poses found by the toe's place, and by its place and velocity (VELOCITY_S), in the same memory: each
+    # target from both, weighted by how closely each search's poses agree
+    leg_memory = (keys[g], offsets[g], kept[g])
+    mean, place_spread, source = recall(leg_memory, local_toe, -1 if mirror[g] >= 0 else 0, line, toe_share[g], nt,
+                                        width)
+    by_motion, motion_spread, _ = recall(leg_memory, pose_key, source, line, toe_share[g], nt, width)
+    for t in range(nt):
+        w = place_spread[t] / (place_spread[t] + motion_spread[t])
+        mean[t] = w * by_motion[t] + (1.0 - w) * mean[t]
+    if np.isnan(estimate[g, 0, 0]):  # the gap begins: from the last pose seen, so nothing jumps
+        if np.isnan(last_seen[g, 0, 0]):
+            estimate[g, :nt] = mean
+        else:
+            estimate[g, :nt] = last_seen[g, :nt]
+    estimate[g, :nt] += SMOOTHING * (mean - estimate[g, :nt])
+    for t in range(nt):
+        k = legs[g, 3 + t]
+        if not vfinite(lm[k]):
+            lm[k] = origin + mv(rot, estimate[g, t] + toe_share[g, t] * local_toe)
+            if toe_share[g, t] == 1.0 and reach[g] > 0.0:
+                lm[k] = within_reach(lm[k], toe, hip, reach[g])
+            out[k] = True
+
+
+@njit(cache=True, inline="always")
+def _keep_pose(g, lm, layout, memory, state, pelvis, pose):
+    """Leg ``g`` seen whole: keep its pose (and, mirrored, as one the other leg may fall back on) and how far it
+    reaches. ``pose``: (the toe in the pelvis frame, the pose's key, the foot's line)."""
+    legs, mirror, toe_share, _ = layout
+    keys, offsets, kept, last_kept = memory
+    last_seen, reach = state[0], state[6]
+    origin, rot, hip, seen = pelvis
+    local_toe, pose_key, line = pose
+    nt, width = legs[g, 2], legs.shape[1] - 3
+    for t in range(nt):
+        seen[t] = mtv(rot, lm[legs[g, 3 + t]] - origin)
+        last_seen[g, t] = seen[t] - toe_share[g, t] * local_toe
+    seen[width] = line
+    keep(keys[g, 0], offsets[g, 0], kept[g, 0], last_kept[g, 0], pose_key, seen)
+    for t in range(nt):
+        if toe_share[g, t] == 1.0:  # (an ankle: how far the leg reaches, for either leg)
+            far = vnorm(lm[legs[g, 3 + t]] - hip)
+            reach[g] = grown_reach(reach[g], far)
+            if mirror[g] >= 0:
+                reach[mirror[g]] = grown_reach(reach[mirror[g]], far)
+    other = mirror[g]
+    if other >= 0:  # and, mirrored, as a pose the other leg may fall back on
+        keep(keys[other, 1], offsets[other, 1], kept[other, 1], last_kept[other, 1], pose_key * FLIP_KEY,
+             seen * FLIP)

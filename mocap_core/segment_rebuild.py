@@ -231,6 +231,10 @@ class SegmentRebuilder(LandmarkFill):
         # neither), and since when (seconds)
         self.along = np.full((len(self.segments), width), -1, np.int64)
         self.along_since = np.full((len(self.segments), width), np.nan)
+        # (as the kernel takes them)
+        self._table = (self.segments, self.rebuilt_count, self.rigid_count, self.refined_count, self.held_from,
+                       self.shaft_rolls, self.pairs, self.lone)
+        self._state = (self.reference, self.distance, self.last, self.slid, self.along, self.along_since)
 
     def fill(self, landmarks, tracking=None, time_s=np.nan, markers=None, filled=None) -> np.ndarray:
         """One frame (LandmarkFill.fill): fill what can be rebuilt, in place. ``tracking``: as many as
@@ -243,117 +247,148 @@ class SegmentRebuilder(LandmarkFill):
                                  f"{'none' if tracking is None else len(tracking)}")
             points = np.concatenate([landmarks, tracking])
         rebuilt = np.zeros(len(points), np.bool_)
-        rebuild_frame(points, self.segments, self.rebuilt_count, self.rigid_count, self.refined_count, self.held_from,
-                      self.shaft_rolls, self.pairs, self.lone, self.reference, self.distance, self.last, self.slid,
-                      self.along, self.along_since, float(time_s), rebuilt)
+        rebuild_frame(points, self._table, self._state, float(time_s), rebuilt)
         if points is not landmarks:
             landmarks[:] = points[:len(landmarks)]
         return rebuilt[:len(landmarks)]
 
 
 @njit(cache=True)
-def rebuild_frame(lm, segments, rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, lone,
-                  reference, distance, last, slid, along, along_since, time_s, rebuilt):
-    seen = np.zeros(segments.shape[1], np.bool_)
-    before, after = np.empty((segments.shape[1], 3)), np.empty((segments.shape[1], 3))
-    weights = np.empty(segments.shape[1])
-    on_shaft = np.zeros(segments.shape[1], np.bool_)  # which gathered partners are tracking markers
-    point, above = np.empty((1, 3)), np.empty((segments.shape[1], 3))
-    previous = np.empty((segments.shape[1], 3))  # each member in the frame before
-    for s in range(segments.shape[0]):
-        seg, rigid = segments[s], rigid_count[s]
-        width, count = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
-        for k in range(seg.shape[0]):
-            if seg[k] < 0:
-                break
-            width += 1
-            seen[k] = vfinite(lm[seg[k]])
-            if seen[k] and k < rigid:
-                count += 1
-            if k < rebuilt_count[s]:
-                previous[k] = last[s, k]
-                last[s, k] = lm[seg[k]]  # (NaN when lost; a rebuilt one is written below)
-        _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
-        # Each seen member's reference: the segment as it is now, unless that has fewer partners than
-        # the one kept, which then stays (a heel lost a frame before its ankle would leave a reference of the
-        # metatarsals alone, all on one line, from which the ankle cannot be rebuilt).
-        if count > MIN_SHAFT_PARTNERS:
-            for k in range(rigid):
-                if seen[k] and count - 1 >= _partners(reference[s, k], k, rigid):
-                    slid[s, k], along[s, k] = -1, -1
-                    for m in range(rigid):
-                        if seen[m]:
-                            reference[s, k, m] = lm[seg[m]]
-                        else:
-                            reference[s, k, m] = np.nan
-        if count == rigid or count < MIN_SHAFT_PARTNERS:
+def rebuild_frame(lm, table, state, time_s, rebuilt):
+    """One frame, in place (SegmentRebuilder.fill): ``table``, the segments (segment_table: segments,
+    rebuilt_count, rigid_count, refined_count, held_from, shaft_rolls, pairs, lone); ``state``, what the rebuild
+    keeps (reference, distance, last, slid, along, along_since); ``rebuilt``: the points put. Plain tuples: numba
+    reads them from Python faster than NamedTuples."""
+    width = table[0].shape[1]
+    # work arrays: which members are seen; a member's gathered partners before and after, their weights and which
+    # are tracking markers; the bone above's points; each member in the frame before
+    work = (np.zeros(width, np.bool_), np.empty((width, 3)), np.empty((width, 3)), np.empty(width),
+            np.zeros(width, np.bool_), np.empty((1, 3)), np.empty((width, 3)), np.empty((width, 3)))
+    for s in range(table[0].shape[0]):
+        _rebuild_segment(s, lm, table, state, time_s, rebuilt, work)
+
+
+@njit(cache=True, inline="always")
+def _rebuild_segment(s, lm, table, state, time_s, rebuilt, work):
+    segments, rebuilt_count, rigid_count, refined_count, _, _, pairs, lone = table
+    reference, distance, last, slid, along, along_since = state
+    seen, previous = work[0], work[7]
+    seg, rigid = segments[s], rigid_count[s]
+    width, count = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
+    for k in range(seg.shape[0]):
+        if seg[k] < 0:
+            break
+        width += 1
+        seen[k] = vfinite(lm[seg[k]])
+        if seen[k] and k < rigid:
+            count += 1
+        if k < rebuilt_count[s]:
+            previous[k] = last[s, k]
+            last[s, k] = lm[seg[k]]  # (NaN when lost; a rebuilt one is written below)
+    _learn_distances(lm, seg, width, refined_count[s], seen, rebuilt, distance[s])
+    # Each seen member's reference: the segment as it is now, unless that has fewer partners than
+    # the one kept, which then stays (a heel lost a frame before its ankle would leave a reference of the
+    # metatarsals alone, all on one line, from which the ankle cannot be rebuilt).
+    if count > MIN_SHAFT_PARTNERS:
+        for k in range(rigid):
+            if seen[k] and count - 1 >= _partners(reference[s, k], k, rigid):
+                slid[s, k], along[s, k] = -1, -1
+                for m in range(rigid):
+                    if seen[m]:
+                        reference[s, k, m] = lm[seg[m]]
+                    else:
+                        reference[s, k, m] = np.nan
+    if count == rigid or count < MIN_SHAFT_PARTNERS:
+        return
+    segment = (lm, seg, rigid, width, seen)
+    for k in range(rebuilt_count[s]):
+        if seen[k] or rebuilt[seg[k]] or not vfinite(reference[s, k, k]):
             continue
-        for k in range(rebuilt_count[s]):
-            if seen[k] or rebuilt[seg[k]] or not vfinite(reference[s, k, k]):
-                continue
-            if lone[s] and not (seen[1 - k] and not rebuilt[seg[1 - k]]):  # (a lone styloid: the other one seen)
-                continue
-            slid[s, k] = _slid(lm, seg, rigid, seen, reference[s, k], pairs[s, 0], pairs[s, 1], slid[s, k], along[s],
-                               along_since[s], k, time_s)
-            n, shaft = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
-            for m in range(rigid):
-                if m != slid[s, k] and seen[m] and vfinite(reference[s, k, m]):
-                    before[n], after[n] = reference[s, k, m], lm[seg[m]]
-                    weights[n] = nearness_weight(vnorm(reference[s, k, m] - reference[s, k, k]))
-                    on_shaft[n] = seg[m] >= N_LANDMARKS
-                    if on_shaft[n]:
-                        shaft += 1
-                    n += 1
-            # (rolled: carried by partners i and j's line, then about it by the bone above; forearm_roll: from the
-            # member's side of that line in the frame before, see ROLLS_ABOUT_SHAFT)
-            if lone[s] and n - 1 < lone[s]:
-                continue
-            rolled, forearm_roll, fitted_roll, i, j = False, False, False, 0, 1
-            if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
-                rot, t = rigid_fit_weighted(before, after, weights, n)
-                fitted_roll = (shaft_rolls[s] == 1 and k < refined_count[s] and 0 < shaft < n
-                               and _above_seen(rigid, width, seen, distance[s, k]))
-            elif n == MIN_SHAFT_PARTNERS and shaft == 1:
-                rot, t = line_carry(before[0], before[1], after[0], after[1])
-                forearm_roll = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen,
-                                                                                              distance[s, k])
-                rolled = forearm_roll
-            elif n >= 2 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k]):
-                i, j = _farthest(before, n)
-                rot, t = line_carry(before[i], before[j], after[i], after[j])
-                rolled = True
-            else:
-                continue
-            p = mv(rot, reference[s, k, k]) + t
-            if forearm_roll and vfinite(previous[k]):
-                p = _turned_toward(p, after[i], after[j], previous[k])
-            if rolled:
-                p = _roll_by_above(p, after[i], after[j], lm, seg, rigid, width, seen, distance[s, k], point, above)
-            elif k < refined_count[s]:
-                firm, rolled_p = 0.0, p
-                if fitted_roll:  # (ROLL_FIRM_FROM)
-                    pivot, toward = _shaft_line(after, on_shaft, n)
-                    firm = _roll_firmness(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k])
-                    if firm > 0.0:
-                        rolled_p = _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance[s, k],
-                                                  point, above)
-                kept = rolled_p
-                if firm < 1.0:
-                    kept = _keep_distances(p, lm, seg, rigid, width, seen, distance[s, k], DISTANCE_PRIOR, EVERY_POINT)
-                    kept = _keep_distances(kept, lm, seg, rigid, width, seen, distance[s, k], TRACKING_PRIOR,
-                                           held_from[s])
-                p = firm * rolled_p + (1.0 - firm) * kept
-            lm[seg[k]] = p
-            last[s, k] = p
-            rebuilt[seg[k]] = True
+        if lone[s] and not (seen[1 - k] and not rebuilt[seg[1 - k]]):  # (a lone styloid: the other one seen)
+            continue
+        slid[s, k] = _slid(segment, reference[s, k], (pairs[s, 0], pairs[s, 1]), slid[s, k],
+                           (along[s], along_since[s]), k, time_s)
+        _rebuild_member(s, k, segment, table, state, rebuilt, work)
+
+
+@njit(cache=True, inline="always")
+def _rebuild_member(s, k, segment, table, state, rebuilt, work):
+    """Member k of segment s, lost: from the rigid motion of its partners seen, or carried along a line of two
+    and rolled by the bone above; then held to its learned distances."""
+    lm, seg, rigid, width, seen = segment
+    refined_count, held_from, shaft_rolls, lone = table[3], table[4], table[5], table[7]
+    reference, distance, last, slid = state[0], state[1], state[2], state[3]
+    _, before, after, weights, on_shaft, point, above, previous = work
+    n, shaft = np.int64(0), 0  # int64 from the start: a literal would compile each kernel it reaches twice
+    for m in range(rigid):
+        if m != slid[s, k] and seen[m] and vfinite(reference[s, k, m]):
+            before[n], after[n] = reference[s, k, m], lm[seg[m]]
+            weights[n] = nearness_weight(vnorm(reference[s, k, m] - reference[s, k, k]))
+            on_shaft[n] = seg[m] >= N_LANDMARKS
+            if on_shaft[n]:
+                shaft += 1
+            n += 1
+    # (rolled: carried by partners i and j's line, then about it by the bone above; forearm_roll: from the
+    # member's side of that line in the frame before, see ROLLS_ABOUT_SHAFT)
+    if lone[s] and n - 1 < lone[s]:
+        return
+    rolled, forearm_roll, fitted_roll, i, j = False, False, False, 0, 1
+    if n >= MIN_PARTNERS and _spread(before, n) >= MIN_SPREAD_M:
+        rot, t = rigid_fit_weighted(before, after, weights, n)
+        fitted_roll = (shaft_rolls[s] == 1 and k < refined_count[s] and 0 < shaft < n
+                       and _above_seen(rigid, width, seen, distance[s, k]))
+    elif n == MIN_SHAFT_PARTNERS and shaft == 1:
+        rot, t = line_carry(before[0], before[1], after[0], after[1])
+        forearm_roll = shaft_rolls[s] == 1 and k < refined_count[s] and _above_seen(rigid, width, seen,
+                                                                                      distance[s, k])
+        rolled = forearm_roll
+    elif n >= 2 and k < refined_count[s] and _above_seen(rigid, width, seen, distance[s, k]):
+        i, j = _farthest(before, n)
+        rot, t = line_carry(before[i], before[j], after[i], after[j])
+        rolled = True
+    else:
+        return
+    p = mv(rot, reference[s, k, k]) + t
+    if forearm_roll and vfinite(previous[k]):
+        p = _turned_toward(p, after[i], after[j], previous[k])
+    if rolled:
+        p = _roll_by_above(p, (after[i], after[j]), segment, distance[s, k], (point, above))
+    elif k < refined_count[s]:
+        p = _held_to_distances(p, segment, distance[s, k], held_from[s], (after, on_shaft, n, fitted_roll),
+                               (point, above))
+    lm[seg[k]] = p
+    last[s, k] = p
+    rebuilt[seg[k]] = True
 
 
 @njit(cache=True)
-def _slid(lm, seg, rigid, seen, reference, i, j, before, along, along_since, k, time_s):
-    """Which of the bony pair at positions i, j (-1: none) has slid since ``reference``, the member's (BONY_PAIRS):
-    -1 while their spacing holds, unless one has slid along with it kept for SLID_ALONG_S (``along``,
-    ``along_since``: the segment's, kept here; ``k``: the member); ``before`` (the last verdict) where it cannot
-    be told."""
+def _held_to_distances(p, segment, distance, held_from, partners, work):
+    """A refined member's rigid estimate ``p`` held to its learned distances (DISTANCE_PRIOR, TRACKING_PRIOR),
+    and, as firmly as the bone above fixes it, rolled about the shaft's line by that bone's tracking markers
+    (``partners``: the gathered (after, on_shaft, n, fitted_roll); ROLL_FIRM_FROM)."""
+    after, on_shaft, n, fitted_roll = partners
+    firm, rolled_p = 0.0, p
+    if fitted_roll:  # (ROLL_FIRM_FROM)
+        line = _shaft_line(after, on_shaft, n)
+        firm = _roll_firmness(p, line, segment, distance)
+        if firm > 0.0:
+            rolled_p = _roll_by_above(p, line, segment, distance, work)
+    kept = rolled_p
+    if firm < 1.0:
+        kept = _keep_distances(p, segment, distance, DISTANCE_PRIOR, EVERY_POINT)
+        kept = _keep_distances(kept, segment, distance, TRACKING_PRIOR, held_from)
+    return firm * rolled_p + (1.0 - firm) * kept
+
+
+@njit(cache=True)
+def _slid(segment, reference, pair, before, sliding_since, k, time_s):
+    """Which of the bony pair at positions ``pair`` = (i, j) (i -1: none) has slid since ``reference``, the
+    member's (BONY_PAIRS): -1 while their spacing holds, unless one has slid along with it kept for SLID_ALONG_S
+    (``sliding_since`` = (along, along_since): the segment's, kept here; ``k``: the member); ``before`` (the last
+    verdict) where it cannot be told. ``segment``: this frame's (lm, seg, rigid, width, seen)."""
+    lm, seg, rigid, _, seen = segment
+    i, j = pair
+    along, along_since = sliding_since
     if i < 0 or not (vfinite(reference[i]) and vfinite(reference[j])):
         return -1
     if not (seen[i] and seen[j]):
@@ -390,9 +425,12 @@ def _turned_toward(p, pivot, toward, target):
 
 
 @njit(cache=True)
-def _roll_by_above(p, pivot, toward, lm, seg, rigid, width, seen, distance, point, above):
-    """``p`` turned about the line from ``pivot`` toward ``toward`` to keep its learned distances to the bone
-    above's seen tracking markers best (``point`` and ``above``: work arrays)."""
+def _roll_by_above(p, line, segment, distance, work):
+    """``p`` turned about the ``line`` (pivot, toward) to keep its learned distances to the bone above's seen
+    tracking markers best (``work``: the arrays point and above)."""
+    pivot, toward = line
+    lm, seg, rigid, width, seen = segment
+    point, above = work
     line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
     point[0] = p
     for m in range(rigid, width):
@@ -417,10 +455,12 @@ def _shaft_line(partners, on_shaft, n):
 
 
 @njit(cache=True)
-def _roll_firmness(p, pivot, toward, lm, seg, rigid, width, seen, distance):
-    """How far to trust a roll of ``p`` about the line from ``pivot`` toward ``toward`` by the bone above's
-    tracking markers (0-1): by how fast its distance to them changes with the roll, metres per radian, at best
-    (ROLL_FIRM_FROM, ROLL_FIRM_FULL)."""
+def _roll_firmness(p, line, segment, distance):
+    """How far to trust a roll of ``p`` about the ``line`` (pivot, toward) by the bone above's tracking markers
+    (0-1): by how fast its distance to them changes with the roll, metres per radian, at best (ROLL_FIRM_FROM,
+    ROLL_FIRM_FULL)."""
+    pivot, toward = line
+    lm, seg, rigid, width, seen = segment
     line = (toward - pivot) / max(vnorm(toward - pivot), 1e-9)
     across = np.cross(line, p - pivot)  # p's velocity per radian of roll
     rate = 0.0
@@ -489,10 +529,11 @@ def _learn_distances(lm, seg, width, refined, seen, rebuilt, distance):
 
 
 @njit(cache=True)
-def _keep_distances(p, lm, seg, rigid, width, seen, distance, prior, held_from):
+def _keep_distances(p, segment, distance, prior, held_from):
     """Gauss-Newton: the point nearest the estimate ``p`` (weight ``prior``) that keeps its learned
     distances to the seen points (``held_from`` >= 0: to the tracking markers from that point on);
     unchanged unless a distance-only point is seen."""
+    lm, seg, rigid, width, seen = segment
     if not _above_seen(rigid, width, seen, distance):
         return p
     q = p.copy()

@@ -22,14 +22,12 @@ class Swivel(LimbFill):
         n = len(limb.joints)
         self.bend, self.bend_ok = np.zeros((n, n + 1, 2, 3)), np.zeros((n, n + 1, 2), bool)
         self.dir_sum, self.dir_sq, self.dir_n = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
+        self._state = (self.bend, self.bend_ok, self.dir_sum, self.dir_sq, self.dir_n)  # (as the kernel takes it)
 
     def before(self, frame: LimbFrame) -> None:
         limb = self.limb
         af.learn_directions(frame.positions, frame.frames, frame.status, limb.joints, self.dir_sum, self.dir_sq,
                             self.dir_n)
         if limb.has_prev[0]:
-            frame.out[0] += af.swivel_fill(frame.positions, frame.frames, frame.status, limb.joints,
-                                           limb.parent_of_root, limb.prev_pos, limb.prev_frames,
-                                           limb.prev_parent_frame, self.bend, self.bend_ok, self.dir_sum,
-                                           self.dir_sq, self.dir_n, frame.recalled, limb.lengths, frame.modelled,
-                                           frame.model_weight)
+            frame.out[0] += af.swivel_fill((frame.positions, frame.frames, frame.status), limb.chain, limb.last,
+                                           self._state, (frame.recalled, frame.modelled, frame.model_weight))

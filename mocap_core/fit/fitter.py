@@ -183,10 +183,10 @@ class SkeletonFitter:
         """``weak``: the motion task almost off (a start has no last frame); ``robust_m``: another Cauchy scale."""
         s = self.settings
         motion = 1e-4 if weak else 1.0
-        return fit_pose(self.root, self.R, x, self.bone, self.offsets_m, PARENT_INDEX, self.subject.offsets, SLOT,
-                        UP, CHAINS, ROTATING, root_pred, L_pred, self.w_marker, robust_m or s.robust_m,
-                        self.w_rot * motion, self.w_root * motion, self.subject.rest, self.w_rest, iterations,
-                        s.tolerance, self._P, self._w)
+        return fit_pose((self.root, self.R), (x, self.bone, self.offsets_m, self.w_marker),
+                        (PARENT_INDEX, self.subject.offsets, SLOT, CHAINS, ROTATING), UP,
+                        (root_pred, L_pred, self.w_rot * motion, self.w_root * motion, self.subject.rest, self.w_rest),
+                        robust_m or s.robust_m, (iterations, s.tolerance), (self._P, self._w))
 
     def _frame(self, residual: float, iterations: int) -> FitFrame:
         seen = self._w > self.settings.located_weight

@@ -171,15 +171,16 @@ def tree_solve(H, g, up):
 
 
 @njit(cache=True)
-def fit_pose(root, R, x, bone, c, parent, offsets, slot, up, chains, rotating,
-             root_pred, L_pred, w_marker, robust_m, w_rot, w_root, L_rest, w_rest,
-             max_iterations, tolerance, P, weights):
-    """One frame's fit, in place on ``root`` (3,) and ``R`` (J, 3, 3); ``P`` gets the joints, ``weights`` (M,)
-    each marker's final robust weight (0 for an unseen or unassigned marker). Returns (iterations, residual
-    RMS of the seen markers in metres)."""
-    markers = (x, bone, c, w_marker)
-    tree = (parent, offsets, slot, chains, rotating)
-    motion = (root_pred, L_pred, w_rot, w_root, L_rest, w_rest)
+def fit_pose(pose, markers, tree, up, motion, robust_m, stop, out):
+    """One frame's fit, in place on ``pose`` = (root (3,), R (J, 3, 3)); ``out`` = (P, weights): P gets the joints,
+    weights (M,) each marker's final robust weight (0 for an unseen or unassigned marker). ``markers``: (x, bone,
+    c, w_marker); ``tree``: (parent, offsets, slot, chains, rotating); ``motion``: (root_pred, L_pred, w_rot,
+    w_root, L_rest, w_rest); ``stop``: (max_iterations, tolerance). Plain tuples: numba reads them from Python
+    faster than NamedTuples. Returns (iterations, residual RMS of the seen markers in metres)."""
+    root, R = pose
+    parent, offsets, slot = tree[0], tree[1], tree[2]
+    max_iterations, tolerance = stop
+    P, weights = out
     n = slot.max() + 3
     it = 0
     for it in range(1, max_iterations + 1):

@@ -174,12 +174,12 @@ def test_swivel_angle_from_the_next_joints_frame_known_answer():
         usual = ref.T @ (bone / np.linalg.norm(bone))
         for off in (0.3, -0.3):
             prior = np.array([np.cos(truth + off), np.sin(truth + off), 0])
-            u = on_circle_fitting(prior, axis, radius, centre_to_target, ref, usual, weight, np.zeros(3), 0.0)
+            u = on_circle_fitting(prior, axis, radius, centre_to_target, (ref, usual, weight), (np.zeros(3), 0.0))
             assert abs(np.linalg.norm(u) - 1) < 1e-9 and abs(u @ axis) < 1e-9
             np.testing.assert_allclose(u, elbow / radius, atol=0.01)  # within 0.6 degrees: turning costs a little
     prior = np.array([1.0, 0, 0])
-    np.testing.assert_allclose(on_circle_fitting(prior, axis, radius, centre_to_target, ref, usual, np.zeros(3),
-                                                 np.zeros(3), 0.0),
+    np.testing.assert_allclose(on_circle_fitting(prior, axis, radius, centre_to_target, (ref, usual, np.zeros(3)),
+                                                 (np.zeros(3), 0.0)),
                                prior)
 
 
