@@ -27,7 +27,7 @@ nothing builds up.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -36,7 +36,7 @@ from pydantic import BaseModel, Field
 
 from mocap_core.analytic_fill import all_finite, nearest_on_circle, nearest_on_sphere
 from mocap_core.fill_units import LimbFill, LimbFrame
-from mocap_core.frame_clock import next_frame_s
+from mocap_core.frame_clock import FrameClock
 from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vnorm
 from mocap_core.skeleton import ESTIMATED, HELD, LOCATED, MISSING
 
@@ -141,29 +141,29 @@ class BlendState:
     step: float = 0.0
     omega: float = 0.0
     course_on: bool = True    # blend_course: after a loss, leave the markers' course as course_weight says
-    frame_s: float = DEFAULT_FRAME_S
-    last_time_s: float = float("nan")
+    clock: FrameClock = field(default_factory=lambda: FrameClock(DEFAULT_FRAME_S))  # (a limb's: shared with it)
 
     def __post_init__(self):
         self._memory = tuple(self.memory)  # (as blend_transitions takes it)
 
     @classmethod
-    def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0, course: bool = True) -> "BlendState":
+    def empty(cls, n: int, step: float = 0.0, half_life_s: float = 0.0, course: bool = True,
+              clock: FrameClock | None = None) -> "BlendState":
         memory = BlendMemory(np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
                              np.zeros((n, 2, 3)), np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64),
                              np.zeros(1, bool), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
                              np.full(n, np.inf), np.zeros(n), np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)),
                              np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((n, 3)))
         return cls(memory, np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
-                   BLEND_X / half_life_s if half_life_s > 0 else 0.0, course)
+                   BLEND_X / half_life_s if half_life_s > 0 else 0.0, course, clock or FrameClock(DEFAULT_FRAME_S))
 
     @property
-    def on(self) -> bool:
-        return self.step > 0 or self.omega > 0
+    def frame_s(self) -> float:
+        return self.clock.frame_s
 
     def advance_clock(self, time_s: float) -> None:
-        """The time since the last frame (frame_clock.next_frame_s)."""
-        self.frame_s, self.last_time_s = next_frame_s(self.frame_s, self.last_time_s, time_s), time_s
+        """The time since the last frame (FrameClock.advance)."""
+        self.clock.advance(time_s)
 
     def blend(self, positions, status, idx, frames=None) -> None:
         """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone
@@ -191,10 +191,9 @@ class Blend(LimbFill):
     def __init__(self, limb, options):
         super().__init__(limb, options)
         self.state = BlendState.empty(len(limb.joints), options.reacquire_step_m, options.blend_half_life_s,
-                                      options.blend_course)
+                                      options.blend_course, limb.clock)  # (the limb advances it)
 
     def after(self, frame: LimbFrame) -> None:
-        self.state.frame_s = self.limb.clock.frame_s  # (the limb's clock: one for all its fills)
         self.state.blend(frame.positions, frame.status, self.limb.joints, frame.frames)
 
 

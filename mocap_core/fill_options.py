@@ -88,4 +88,3 @@ FillOptions = limb_options(LIMB_FILLS)
 STUDIO_HIPS = HipOptions(when_lost="fit", rebuild=True, pose_memory=True, pair_guard=True)
 STUDIO = FillOptions(swivel=True, segment_carry=True, limb_memory=True, body_model=True, end_model=True,
                      reacquire_step_m=0.01, blend_half_life_s=0.1)
-HELP = {name: field.description for model in (HipOptions, FillOptions) for name, field in model.model_fields.items()}

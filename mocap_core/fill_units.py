@@ -12,7 +12,7 @@ otherwise (:meth:`Fill.wanted`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar, Iterable, NamedTuple, Sequence
 
 import numpy as np
@@ -85,6 +85,10 @@ class LimbFrame:
     recalled: np.ndarray      # (n, 3) per limb joint, where the limb memory would have it (NaN: no say)
     modelled: np.ndarray      # (n, 3) and where the body model puts it,
     model_weight: np.ndarray  # (n,) with this weight (the swivel reads all three)
+    skeleton: tuple = field(init=False)  # (positions, frames, status), as the kernels take them
+
+    def __post_init__(self):
+        self.skeleton = (self.positions, self.frames, self.status)
 
 
 class LimbFill(Fill):

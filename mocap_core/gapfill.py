@@ -124,7 +124,7 @@ class LimbFiller:
             self.chain_end, self.has_prev[0] = n, False        # only once it is seen
             self._chain = self._chain_up_to(n)
         out = frame.out
-        _fill_limb((positions, frames, status), *self._chain, self.solver.kernel_id, self._params, out)
+        _fill_limb(frame.skeleton, *self._chain, self.solver.kernel_id, self._params, out)
         never = idx[n:]  # joints never located (the carries would hold them from nothing)
         positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
         for after in self._after:

@@ -53,9 +53,9 @@ class LimbMemory(LimbFill):
 
     def before(self, frame: LimbFrame) -> None:
         """Learn this frame's pose, and hand the swivel where the poses learned put the lost joints."""
-        skeleton, idx, parent = (frame.positions, frame.frames, frame.status), self.limb.joints, self.limb.parent_of_root
-        _learn(skeleton, idx, self.other, parent, self._rings)
-        _recall(skeleton, idx, parent, self._rings, self.pred)
+        idx, parent = self.limb.joints, self.limb.parent_of_root
+        _learn(frame.skeleton, idx, self.other, parent, self._rings)
+        _recall(frame.skeleton, idx, parent, self._rings, self.pred)
         frame.recalled = self.pred
 
 
