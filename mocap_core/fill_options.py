@@ -87,4 +87,4 @@ FillOptions = limb_options(LIMB_FILLS)
 # The studio's choice (the ``studio`` preset, mocap_core.presets): every option on.
 STUDIO_HIPS = HipOptions(when_lost="fit", rebuild=True, pose_memory=True, pair_guard=True)
 STUDIO = FillOptions(swivel=True, segment_carry=True, limb_memory=True, body_model=True, end_model=True,
-                     reacquire_step_m=0.01, blend_half_life_s=0.1)
+                     reacquire_step_m=0.01, blend_half_life_s=0.1, rigid=True)

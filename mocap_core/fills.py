@@ -11,6 +11,7 @@ from mocap_core.limb_memory import LimbMemory
 from mocap_core.pair_guard import PairGuard
 from mocap_core.partial_means import PartialMeans
 from mocap_core.pose_memory import PoseMemory
+from mocap_core.rigid_chain import RigidChain
 from mocap_core.segment_carry import SegmentCarry
 from mocap_core.segment_rebuild import SegmentRebuilder
 from mocap_core.swivel import Swivel
@@ -32,4 +33,5 @@ LIMB_FILLS = (
     BodyModelSteer,  # where the rest of the body puts it (steers the swivel)
     Swivel,          # lost joints between two located ones, on their swivel circle
     Blend,           # after Algorithm 1: every change of source met without a twitch
+    RigidChain,      # last: the limb as the subject's rigid chain fitted to what was placed
 )

@@ -101,6 +101,16 @@ class LimbFiller:
         self.limits = ChainLimits(np.eye(3), c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                                   c.twists[self.joints], c.has_twist[self.joints])  # (each run's ref0 its own)
 
+    def use(self, subject) -> None:
+        """The limb's rigid chain (if on) with the bones of a calibrated subject (mocap_core.fit.subject)."""
+        if self.rigid is not None:
+            self.rigid.use(subject)
+
+    @property
+    def rigid(self):
+        from mocap_core.rigid_chain import RigidChain
+        return self.get(RigidChain)
+
     def get(self, kind: type) -> LimbFill | None:
         """This limb's fill of that class, if on."""
         return next((fill for fill in self.fills if isinstance(fill, kind)), None)
@@ -268,6 +278,15 @@ class GapFiller:
         constraints = constraints if constraints is not None else load_constraints()
         self.limbs = {limb: LimbFiller(limb, solver, params, constraints, options.for_limb(limb))
                       for limb in LIMBS}  # the torso first
+
+    def use(self, subject) -> None:
+        """Every limb's rigid chain (where on) with the bones of a calibrated subject."""
+        for f in self.limbs.values():
+            f.use(subject)
+
+    @property
+    def rigid(self) -> bool:
+        return any(f.rigid is not None for f in self.limbs.values())
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:
         return {limb: f.fill(positions, frames, status, time_s) for limb, f in self.limbs.items()}

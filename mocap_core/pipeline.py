@@ -53,6 +53,8 @@ class SkeletonPipeline:
         self.fills = LandmarkFills(hips if fill_gaps else HipOptions(), MarkerSet(m.tracking_of, m.present(), m))
         self.localizer = Localizer(profile.body)
         self.filler = GapFiller(solver, params, constraints, options.ik) if fill_gaps else None
+        self.profile_name = profile.name
+        self.subject = None
 
     def landmarks(self, markers: np.ndarray) -> np.ndarray:
         """Marker frames (F, N, 3) -> landmark frames with the pelvis markers filled."""
@@ -75,8 +77,26 @@ class SkeletonPipeline:
                 self.filler.fill(pos[f], frames[f], status[f], (start + f) * self.frame_s)
         return SolvedChunk(start, pos, frames, status)
 
-    def run(self, markers: np.ndarray, chunk: int = 250) -> Iterator[SolvedChunk]:
-        """A take's frames, the markers no body could have put there dropped first (mocap_core.marker_gate)."""
+    def use(self, subject) -> None:
+        """Solve with a calibrated subject's bones (mocap_core.fit.subject): the rigid chains keep them."""
+        if self.filler is not None:
+            self.filler.use(subject)
+        self.subject = subject
+
+    def calibrate(self, markers: np.ndarray):
+        """The subject's bones from the joints that the take's landmarks locate (mocap_core.fit.calibration)."""
+        from mocap_core.fit.calibration import calibrate_bones
+        frames = MarkerGate().filter_take(markers, self.frame_s)
+        landmarks, _ = HipInterpolator(when_lost=self.hips.when_lost).fill_landmarks(self.landmark_map.apply(frames))
+        loc = Localizer(self.localizer.body).localize(landmarks)  # (its body estimates are the solve's)
+        return calibrate_bones(loc.positions, loc.frames, self.profile_name)
+
+    def run(self, markers: np.ndarray, chunk: int = 250, calibrate: bool = True) -> Iterator[SolvedChunk]:
+        """A take's frames, the markers no body could have put there dropped first (mocap_core.marker_gate). With
+        rigid chains and no subject given, the subject's bones are calibrated from the whole take first
+        (``calibrate`` false: learned frame by frame, as the graph's nodes learn them from a stream)."""
+        if calibrate and self.filler is not None and self.filler.rigid and self.subject is None:
+            self.use(self.calibrate(markers))
         for start in range(0, len(markers), chunk):
             part = self.gate.filter_take(markers[start:start + chunk], self.frame_s, start)
             yield self.solve_landmarks(self.landmarks(part), start, self.landmark_map.tracking(part), part)

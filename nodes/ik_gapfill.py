@@ -33,6 +33,8 @@ class Params(FillOptions):
     constraints_file: str | None = None
     max_iterations: int = Field(140, ge=1)
     stop_distance_m: float = Field(0.01, gt=0)
+    subject: str | None = Field(None, description="a subject file (mocap calibrate) whose bones the rigid chain "
+                                "keeps; without one it keeps the lengths learned from the stream")
 
     @model_validator(mode="before")
     @classmethod
@@ -71,6 +73,9 @@ class IkGapfill(Node):
         self.filler = LimbFiller(p.limb, p.solver, SolverParams(p.max_iterations, p.stop_distance_m, p.constraints),
                                  load_constraints(p.constraints_file), FillOptions.of(p))
         self.names = list(LIMBS[p.limb])
+        if p.subject:
+            from mocap_core.fit.subject import load_subject
+            self.filler.use(load_subject(p.subject))
 
     def on_message(self, topic, msg: SkeletonFrame) -> None:
         pos, frames, status = from_message(msg)

@@ -57,6 +57,17 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz:
     return subject
 
 
+def calibrate_bones(P: np.ndarray, R: np.ndarray, name: str, settings: CalibrationSettings | None = None) -> Subject:
+    """A subject of bones only (no marker placed) from located joints (F, J, 3) and bone frames (F, J, 3, 3): what the
+    IK stage's rigid chains take (mocap_core.rigid_chain)."""
+    s = settings or CalibrationSettings()
+    if len(P) > s.max_frames:
+        keep = np.linspace(0, len(P) - 1, s.max_frames).round().astype(int)
+        P, R = P[keep], R[keep]
+    offsets, known, rest = joint_offsets(P, R, s)
+    return Subject(name, offsets, known, [], np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), len(P), False, rest)
+
+
 def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
     """Each joint's median position in its parent's frame over the frames where both are located, and its
     typical rotation there (the chordal mean); the root is known where it is ever located."""

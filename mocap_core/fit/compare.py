@@ -82,11 +82,13 @@ class Reference:
 
 
 def references(rec: Recording, profile: Profile) -> Reference:
-    """Each method's solve of the complete take: the localization for the thesis's method and the studio
-    options (nothing to fill), the fit calibrated on the complete take for the fit."""
+    """Each method's solve of the complete take: the localization for the thesis's method (nothing to fill), the
+    studio options' (their rigid chains move located joints onto the subject's bones), the fit calibrated on the
+    complete take for the fit."""
     located = localize_take(rec, profile)[0]
+    studio = solve("studio", rec.positions.astype(np.float64), rec, profile)[0]
     chunk, _, subject = fit_take(rec.positions, rec.labels, profile, rec.rate_hz)
-    return Reference({"thesis": located, "studio": located, NO_TRACKING: located, "fit": chunk.positions,
+    return Reference({"thesis": located, "studio": studio, NO_TRACKING: studio, "fit": chunk.positions,
                       "fit_subject": chunk.positions}, subject)
 
 

@@ -94,8 +94,10 @@ def test_bvh_read_back_by_bvhio_is_a_t_posed_rigid_rig_that_follows_the_solve(tm
             if status[f, j] != Status.MISSING:
                 errors.append(np.linalg.norm(p - up @ positions[f, j]))
     assert np.ptp(lengths, axis=0).max() < 1e-4
+    # one skeleton: the rigid chains keep the bones the BVH's OFFSETs have, so its forward kinematics puts every
+    # joint where the joints CSV of the same solve has it
     errors = np.array(errors)
-    assert np.median(errors) < 0.01 and errors.max() < 0.05, (np.median(errors), errors.max())
+    assert errors.max() < 1e-3, (np.median(errors), errors.max())
 
 
 def test_bvh_places_a_joint_never_seen_from_the_skeleton_model(tmp_path):
