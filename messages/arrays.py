@@ -1,7 +1,7 @@
 """Typed numpy array fields for pydantic models.
 
 On the wire an array is a msgpack map ``{"dtype": "<f4", "shape": [n, 3], "data": <bytes>}``
-(DESIGN: arrays travel as raw bytes plus dtype and shape, never as lists of floats).
+(docs/design.md: arrays travel as raw bytes plus dtype and shape, never as lists of floats).
 ``Array(dtype, shape)`` builds an annotated field type that accepts either a numpy array or that
 map, and checks dtype and shape; ``None`` in a shape means "any length on this axis".
 """

@@ -1,4 +1,4 @@
-"""Pydantic schemas of every topic (DESIGN "Topics and messages").
+"""Pydantic schemas of every topic (docs/design.md, "Topics and messages").
 
 Conventions shared by all messages:
 - positions are float32 metres in the world frame of the source, right-handed; the header's
@@ -70,7 +70,7 @@ class MarkerSet(Message):
 class MarkerFrame(Message):
     """One frame of labelled markers (``markers/raw``, ``markers/filled``).
 
-    Departure from DESIGN (documented in docs/graph.md): the frame carries its labels, so every frame
+    Departure from the design card (documented in docs/graph.md): the frame carries its labels, so every frame
     is self-describing; a node that joins late or a bag cut anywhere needs no earlier MarkerSet.
     ``flags`` per marker: 0 measured, 1 interpolated, 2 missing.
     """

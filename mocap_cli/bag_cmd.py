@@ -14,8 +14,7 @@ import zmq
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, encode
 from mocap_cli.graph_registry import find_graph, publishers_of
 from mocap_cli.launch_file import LaunchError, NodeEntry, load_launch_file
-from mocap_core.recordings import read_recording
-from nodes.bags import BagWriter, bag_info, export_json, free_piece
+from nodes.bags import BagWriter, bag_info, export_json, free_piece, read_take
 
 log = logging.getLogger("mocap.bag")
 SOURCE_KINDS = {"file_source", "qtm_ingest", "synthetic_source", "bag_player"}
@@ -179,7 +178,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_from_recording(args) -> int:
-    rec = read_recording(args.file)
+    rec = read_take(args.file)
     stop = rec.n_frames if not args.frames else min(rec.n_frames, args.start + args.frames)
     bag = BagWriter(args.output, {"source": rec.source, "rate_hz": rec.rate_hz, "labels": ",".join(rec.labels)})
     t0 = time.time_ns()

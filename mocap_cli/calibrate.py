@@ -9,8 +9,8 @@ from mocap_cli.solve import actor_path
 from mocap_core.fit.calibration import calibrate
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.warmup import ensure_compiled
-from mocap_core.recordings import read_recording
 from mocap_core.skeleton import JOINTS
+from nodes.bags import read_take
 
 log = logging.getLogger("mocap.calibrate")
 
@@ -29,7 +29,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    rec = read_recording(args.file)
+    rec = read_take(args.file)
     ensure_compiled(log)
     if args.seconds:
         rec = rec.slice(0, max(1, int(args.seconds * rec.rate_hz)))

@@ -6,9 +6,10 @@ from pathlib import Path
 
 from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
-from mocap_core.recordings import Recording, read_recording
+from mocap_core.recordings import Recording
 from mocap_core.take_check import (FLOOR_M, TOLERANCE, MarkerGaps, Stretch, marker_gaps, rigid_pairs, spacing_faults,
                                    used_markers)
+from nodes.bags import read_take
 
 log = logging.getLogger("mocap.check")
 SHOWN_GAPS = 12  # the markers with the longest gaps in the table; check.md lists them all
@@ -31,7 +32,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    rec = read_recording(args.file)
+    rec = read_take(args.file)
     profile = profile_for(args.profile, rec.labels, log)
     profile.resolve(rec.labels)  # a label the profile needs and the take lacks is an error here, as in solve
     gaps = [g for g in marker_gaps(rec.positions, used_markers(profile, rec.labels), rec.rate_hz) if g.lost]

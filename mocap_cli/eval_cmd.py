@@ -21,10 +21,10 @@ from mocap_core.hip_interpolation import WhenLost
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.landmark_fills import fill_take
 from mocap_core.profiles import load_profile
-from mocap_core.recordings import read_recording
 from mocap_core.partial_means import PartialMeans
 from mocap_core.presets import PRESETS
 from mocap_core.warmup import ensure_compiled, warm_up
+from nodes.bags import read_take
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_TAKE = str(REPO.parent / "shared" / "data" / "03_sprint_start_BTK_SprintMotion.trc")
@@ -133,7 +133,7 @@ def add_parser(sub) -> None:
 
 
 def run_timing(args) -> int:
-    rec = read_recording(args.take)
+    rec = read_take(args.take)
     localized = localize_take(rec, load_profile(args.profile))
     solvers = list(SOLVERS) if args.solvers == "all" else args.solvers.split(",")
     modes = {"on": [True], "off": [False], "both": [False, True]}[args.constraints]
@@ -181,7 +181,7 @@ def run_gaps(args) -> int:
             measured_joints(joints, mode)
     except ValueError as e:
         raise SystemExit(f"--remove {args.remove}: {e}") from None
-    rec = read_recording(args.take)
+    rec = read_take(args.take)
     profile = load_profile(args.profile)
     from mocap_core.pipeline import SkeletonPipeline
 
@@ -283,7 +283,7 @@ def run_real_gaps(args) -> int:
 
     import numpy as np
 
-    rec = read_recording(args.take)
+    rec = read_take(args.take)
     profile = load_profile(args.profile)
     studio = PRESETS["studio"]
     variants = {"thesis's method": PRESETS["thesis"],
@@ -383,7 +383,7 @@ def run_latency(args) -> int:
     if args.fit:  # a studio calibrates an actor once: the node gets the subject file, not a live calibration
         from mocap_core.fit.calibration import calibrate
 
-        rec = read_recording(args.take)
+        rec = read_take(args.take)
         subject = str(solved.parent / "subject.yaml")
         calibrate(rec.positions, rec.labels, load_profile(args.profile), rec.rate_hz).save(subject)
     sim, port = start_emulator(args.take, "--rate", str(args.rate), "--loop")

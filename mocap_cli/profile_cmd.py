@@ -7,7 +7,7 @@ from pathlib import Path
 from mocap_core.landmark_needs import describe_missing, needed_by, site, unlocatable
 from mocap_core.profile_draft import draft_yaml
 from mocap_core.profiles import DEFAULT_UP, LANDMARKS, load_profile, shipped
-from mocap_core.recordings import read_recording
+from nodes.bags import read_take
 
 
 def add_parser(sub) -> None:
@@ -62,7 +62,7 @@ def landmarks_page() -> str:
 
 
 def cmd_init(args) -> int:
-    rec = read_recording(args.file)
+    rec = read_take(args.file)
     out = Path(args.output)
     if out.exists():
         raise SystemExit(f"mocap profile init: {out} exists; give another -o (a draft never overwrites)")

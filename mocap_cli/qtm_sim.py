@@ -24,8 +24,9 @@ import numpy as np
 
 from mocap_core import qtm_protocol as qp
 from mocap_core.profiles import detect_profile
-from mocap_core.recordings import Recording, read_recording
+from mocap_core.recordings import Recording
 from mocap_core.world import DEFAULT_UP, normalize_up
+from nodes.bags import read_take
 
 log = logging.getLogger("mocap.qtm_sim")
 SLOW_CLIENT_BYTES = 8 * 1024 * 1024  # a client this far behind is dropped rather than slowing the others
@@ -302,7 +303,7 @@ def run(args) -> int:
         except ValueError:
             raise SystemExit(f"--hide {h!r}: expected LABEL:FIRST-LAST, e.g. --hide LELB:100-200") from None
         hide.append((label, first, last))
-    rec = read_recording(args.file)
+    rec = read_take(args.file)
     faults = Faults(args.drop_after, args.stall_at, args.stall_s, hide)
     emulator = QtmEmulator(rec, args.rate, args.loop, args.up_axis or recording_up_axis(rec), faults)
     asyncio.run(serve(emulator, args.host, args.port, args.ready_file))

@@ -16,8 +16,8 @@ from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.warmup import FIT_PARTS, ensure_compiled, pipeline_parts
-from mocap_core.recordings import read_recording
 from mocap_core.skeleton import Status
+from nodes.bags import read_take
 
 log = logging.getLogger("mocap.solve")
 
@@ -81,7 +81,7 @@ def solve_take(args) -> dict:
     """One take, as the arguments say; returns what it counted (frames, per-status shares, seconds). A take of
     several actors (labels "actor1:LASI", "actor2:LASI") is solved one actor at a time, each to files of its own
     (out.csv -> out.actor1.csv, out.actor2.csv)."""
-    rec = read_recording(args.file)
+    rec = read_take(args.file)
     ensure_compiled(log, FIT_PARTS if args.fit or args.subject else
                     pipeline_parts("thesis" if args.thesis else "studio", fill_gaps=not args.no_ik))
     several = actors(rec.labels)

@@ -1,4 +1,4 @@
-"""Pure algorithms of the solver: no sockets, no printing, no global state (see STYLE.md)."""
+"""Pure algorithms of the solver: no sockets, no printing, no global state (docs/design.md, "How the code reads")."""
 import os
 
 # LLVM's -O2 for the numba kernels, not its default -O3: a first compile takes about a fifth less, and the kernels

@@ -40,6 +40,7 @@ from mocap_core.ik.constraints import Constraints, load_constraints
 from mocap_core.ik.kernels import mm, mv
 from mocap_core.ik.solvers import ChainLimits, Solver, SolverParams, get_solver
 from mocap_core.ik.solvers_kernels import solve
+from mocap_core.rigid_chain import RigidChain
 from mocap_core.skeleton import ESTIMATED, HELD, INDEX, LIMBS, LOCATED, MISSING, PARENT
 
 # The limb whose poses, mirrored, a limb's fills also learn from.
@@ -107,8 +108,7 @@ class LimbFiller:
             self.rigid.use(subject)
 
     @property
-    def rigid(self):
-        from mocap_core.rigid_chain import RigidChain
+    def rigid(self) -> RigidChain | None:
         return self.get(RigidChain)
 
     def get(self, kind: type) -> LimbFill | None:

@@ -1,4 +1,4 @@
-"""The joints CSV of DESIGN: ``frame,time`` then ``<joint>.x,.y,.z,.status`` for every joint.
+"""The joints CSV (docs/design.md): ``frame,time`` then ``<joint>.x,.y,.z,.status`` for every joint.
 
 Positions in metres in the input's world frame; status is located, estimated, held or missing;
 a missing joint has empty x, y, z.

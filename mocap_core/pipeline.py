@@ -13,6 +13,7 @@ import numpy as np
 
 from mocap_core.blend import DEFAULT_FRAME_S
 from mocap_core.fill_options import HipOptions
+from mocap_core.fit.calibration import calibrate_bones
 from mocap_core.fill_units import MarkerSet
 from mocap_core.gapfill import GapFiller
 from mocap_core.hip_interpolation import HipInterpolator
@@ -85,10 +86,9 @@ class SkeletonPipeline:
 
     def calibrate(self, markers: np.ndarray):
         """The subject's bones from the joints that the take's landmarks locate (mocap_core.fit.calibration)."""
-        from mocap_core.fit.calibration import calibrate_bones
         frames = MarkerGate().filter_take(markers, self.frame_s)
         landmarks, _ = HipInterpolator(when_lost=self.hips.when_lost).fill_landmarks(self.landmark_map.apply(frames))
-        loc = Localizer(self.localizer.body).localize(landmarks)  # (its body estimates are the solve's)
+        loc = Localizer(self.localizer.body).localize(landmarks)  # (a fresh one: the solve's keeps its body estimates)
         return calibrate_bones(loc.positions, loc.frames, self.profile_name)
 
     def run(self, markers: np.ndarray, chunk: int = 250, calibrate: bool = True) -> Iterator[SolvedChunk]:

@@ -290,27 +290,6 @@ def read_recording(path: str | Path, take: str | None = None) -> Recording:
         return read_trc(path)
     if suffix == ".mat":
         return read_mat(path, take)
-    if suffix == ".mcap":
-        return read_bag_markers(path)
+    if suffix == ".mcap":  # (the graph's topic bags: nodes.bags.read_take reads them and these)
+        raise RecordingError(f"{path}: an MCAP bag is read by nodes.bags.read_take, not here")
     raise RecordingError(f"{path}: unknown recording format {suffix!r} (C3D, TRC, MAT or an MCAP bag)")
-
-
-def read_bag_markers(path: Path, topic: str = "markers/raw") -> Recording:
-    """The marker frames of a topic bag (so a bag can feed `mocap solve` and `mocap qtm-sim`)."""
-    from messages import MarkerFrame, decode
-    from nodes.bags import BagError, read_bag
-
-    try:
-        frames = [decode(m.data, m.topic, MarkerFrame) for m in read_bag(path, [topic])]
-    except BagError as e:
-        raise RecordingError(str(e)) from None
-    if not frames:
-        raise RecordingError(f"{path}: no {topic} messages in the bag")
-    labels = frames[0].labels
-    if any(f.labels != labels for f in frames):
-        raise RecordingError(f"{path}: the marker set changes within the bag; split it first")
-    times = np.array([f.header.capture_time_s for f in frames])
-    rate = 1.0 / float(np.median(np.diff(times))) if len(times) > 1 else 100.0
-    pos = np.stack([f.positions for f in frames]).astype(np.float32)
-    meta = {"up_axis": frames[0].header.up_axis} if frames[0].header.up_axis else {}
-    return Recording(list(labels), pos, round(rate, 3), str(path), int(frames[0].header.frame), meta)

@@ -43,6 +43,7 @@ class RigidChain(LimbFill):
         self.root_fixed = np.full(3, np.nan)   # the first joint in its parent's frame from a subject
         self.root_sum = np.zeros(4)            # its running sum (x, y, z, count) while both are located
         self.end_site = np.array([name in END_SITES for name in LIMBS[limb.limb]])
+        self._bones = (limb.lengths, self.fixed, self.root_sum, self.root_fixed)  # (as the kernel takes them)
 
     def use(self, subject) -> None:
         """Take the bones from a calibrated subject (mocap_core.fit.subject.Subject): they stay as it has them."""
@@ -54,9 +55,7 @@ class RigidChain(LimbFill):
             self.fixed[k] = lengths[idx[k + 1]] if subject.known[idx[k + 1]] else np.nan
 
     def after(self, frame: LimbFrame) -> None:
-        limb = self.limb
-        rigid_fit(frame.skeleton, limb.joints, limb.parent_of_root, self.end_site,
-                  (limb.lengths, self.fixed, self.root_sum, self.root_fixed))
+        rigid_fit(frame.skeleton, self.limb.joints, self.limb.parent_of_root, self.end_site, self._bones)
 
 
 @njit(cache=True)

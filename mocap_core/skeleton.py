@@ -50,7 +50,7 @@ END_SITES = frozenset({"head_top", "hand_l", "hand_r", "toe_l", "toe_r"})
 N_JOINTS = len(JOINTS)
 
 # The IK stages of the graph, each with the chain of joints it fills: the torso first, then the four limbs in
-# parallel (DESIGN). A chain's root hangs from a joint the stage before placed (the pelvis, the sternum, the hips).
+# parallel (docs/design.md). A chain's root hangs from a joint the stage before placed (the pelvis, the sternum, the hips).
 LIMBS: dict[str, tuple[str, ...]] = {
     "torso": ("spine0", "spine1", "spine3", "neck", "head", "head_top"),
     "left_arm": ("clavicle_l", "shoulder_l", "elbow_l", "wrist_l", "hand_l"),

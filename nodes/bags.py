@@ -20,13 +20,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, Writer
 
-from messages import BY_SCHEMA, decode
+from messages import BY_SCHEMA, MarkerFrame, decode
 from messages.arrays import WIRE_JSON_SCHEMA
 from messages.codec import json_schemas, peek_schema
+from mocap_core.recordings import Recording, RecordingError, read_recording
 
 CHUNK_BYTES = 64 * 1024
 log = logging.getLogger("mocap.bags")
@@ -131,6 +133,34 @@ def read_bag(path: str | Path, topics: list[str] | None = None) -> Iterator[BagM
     path = Path(path)
     for part in pieces(path) or [path]:
         yield from _read_piece(part, topics)
+
+
+def read_take(path: str | Path, take: str | None = None) -> Recording:
+    """A recording of any kind a command or a source reads: a topic bag's markers, or what
+    mocap_core.recordings.read_recording reads (C3D, TRC, MAT, ``synthetic:``)."""
+    if str(path).lower().endswith(".mcap"):
+        if not Path(path).exists():
+            raise RecordingError(f"{path}: file not found")
+        return read_bag_markers(Path(path))
+    return read_recording(path, take)
+
+
+def read_bag_markers(path: Path, topic: str = "markers/raw") -> Recording:
+    """The marker frames of a topic bag (so a bag can feed `mocap solve` and `mocap qtm-sim`)."""
+    try:
+        frames = [decode(m.data, m.topic, MarkerFrame) for m in read_bag(path, [topic])]
+    except BagError as e:
+        raise RecordingError(str(e)) from None
+    if not frames:
+        raise RecordingError(f"{path}: no {topic} messages in the bag")
+    labels = frames[0].labels
+    if any(f.labels != labels for f in frames):
+        raise RecordingError(f"{path}: the marker set changes within the bag; split it first")
+    times = np.array([f.header.capture_time_s for f in frames])
+    rate = 1.0 / float(np.median(np.diff(times))) if len(times) > 1 else 100.0
+    pos = np.stack([f.positions for f in frames]).astype(np.float32)
+    meta = {"up_axis": frames[0].header.up_axis} if frames[0].header.up_axis else {}
+    return Recording(list(labels), pos, round(rate, 3), str(path), int(frames[0].header.frame), meta)
 
 
 def _read_piece(path: Path, topics: list[str] | None) -> Iterator[BagMessage]:

@@ -12,10 +12,10 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, Message
-from mocap_core.recordings import read_recording
 from mocap_core.world import normalize_up
-from nodes.lockstep import Lockstep
 from nodes.actor_split import ActorSplit, actor_topics
+from nodes.bags import read_take
+from nodes.lockstep import Lockstep
 from nodes.runtime import Node
 
 SET_PERIOD_S = 1.0
@@ -70,7 +70,7 @@ class FileSource(Node):
 
     def setup(self) -> None:
         p = self.params
-        self.rec = read_recording(resolve_path(p.path))
+        self.rec = read_take(resolve_path(p.path))
         self.rate = p.rate_hz or self.rec.rate_hz
         self.first = min(int(p.start_s * self.rec.rate_hz), self.rec.n_frames - 1)
         self.index = self.first

@@ -1,6 +1,6 @@
 """The rigid-skeleton fit as one node: every labelled marker in -> the whole skeleton -> ``skeleton/fitted``.
 
-It takes the place of hip_interpolation, joint_localization and the five ik_gapfill nodes (DESIGN: the studio
+It takes the place of hip_interpolation, joint_localization and the five ik_gapfill nodes (docs/design.md: the studio
 path); retarget with ``input: whole`` turns its output into ``skeleton/solved`` and ``rig/pose``. With
 ``subject:`` it fits that calibrated actor from the first frame; without, it calibrates from the stream's first
 seconds (publishing the thesis's localization meanwhile), refines online, and writes ``save_subject`` once the

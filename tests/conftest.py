@@ -122,7 +122,7 @@ class Graph:
 
 
 def pipeline_graph(source: str, profile: str = "qualisys_sports", extra: str = "", retarget: str = "{}") -> str:
-    """The full graph of DESIGN (source -> ... -> retarget) as launch-file text, with extra nodes."""
+    """The full graph of docs/design.md (source -> ... -> retarget) as launch-file text, with extra nodes."""
     limbs = "".join(f"  - {{id: {limb}, kind: ik_gapfill, params: {{limb: {limb}}}}}\n"
                     for limb in ("torso", "left_arm", "right_arm", "left_leg", "right_leg"))
     return (f"nodes:\n  - {{id: source, kind: file_source, params: {source}}}\n"

@@ -43,9 +43,7 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz:
     """``markers``: (F, M, 3) metres, NaN where not seen, columns named by ``labels``, at ``rate_hz``;
     ``fit_settings``: the fit's (FitSettings) that the refinement rounds use."""
     s = settings or CalibrationSettings()
-    markers = np.asarray(markers, np.float64)
-    if len(markers) > s.max_frames:
-        markers = markers[np.linspace(0, len(markers) - 1, s.max_frames).round().astype(int)]
+    markers = np.asarray(markers, np.float64)[_spread(len(markers), s.max_frames)]
     landmark_map = profile.resolve(labels)
     loc = Localizer(profile.body).localize(landmark_map.apply(markers))
     offsets, known, rest = joint_offsets(loc.positions, loc.frames, s)
@@ -61,11 +59,15 @@ def calibrate_bones(P: np.ndarray, R: np.ndarray, name: str, settings: Calibrati
     """A subject of bones only (no marker placed) from located joints (F, J, 3) and bone frames (F, J, 3, 3): what the
     IK stage's rigid chains take (mocap_core.rigid_chain)."""
     s = settings or CalibrationSettings()
-    if len(P) > s.max_frames:
-        keep = np.linspace(0, len(P) - 1, s.max_frames).round().astype(int)
-        P, R = P[keep], R[keep]
+    keep = _spread(len(P), s.max_frames)
+    P, R = P[keep], R[keep]
     offsets, known, rest = joint_offsets(P, R, s)
     return Subject(name, offsets, known, [], np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), len(P), False, rest)
+
+
+def _spread(n: int, most: int) -> np.ndarray | slice:
+    """Which of n frames to calibrate from: all, or ``most`` spread evenly over them (plenty for medians)."""
+    return np.linspace(0, n - 1, most).round().astype(int) if n > most else slice(None)
 
 
 def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):

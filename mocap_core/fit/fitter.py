@@ -1,4 +1,4 @@
-"""The rigid-skeleton fit, frame by frame: a calibrated subject brought onto the markers seen (DESIGN).
+"""The rigid-skeleton fit, frame by frame: a calibrated subject brought onto the markers seen (docs/design.md).
 
 In the style of mink's typed IK core: the configuration is the pose (root position, bone frames), the
 tasks are the markers and the motion prior, the limits are the thesis's cone and twist limits, and

@@ -1,4 +1,4 @@
-"""A calibrated subject: the actor's bones and where each marker sits on them (DESIGN "Subject files").
+"""A calibrated subject: the actor's bones and where each marker sits on them (docs/design.md, "Data contracts").
 
 Each joint is fixed in its parent's bone frame (``offsets``: a BVH OFFSET, so the bone's length is its
 norm); each marker rides one bone at a fixed offset in that bone's frame. Written by ``mocap

@@ -215,10 +215,10 @@ def test_export_foxglove_puts_the_solved_joints_in_its_3d_scene(tmp_path):
 
 
 def test_a_bag_feeds_mocap_solve_and_the_qtm_emulator(raw_bag, tmp_path):
-    from mocap_core.recordings import read_recording
+    from nodes.bags import read_take
 
-    rec = read_recording(raw_bag)
-    direct = read_recording(data_file(TAKE))
+    rec = read_take(raw_bag)
+    direct = read_take(data_file(TAKE))
     assert rec.labels == direct.labels and rec.n_frames == 240 and rec.rate_hz == pytest.approx(120)
     np.testing.assert_array_equal(rec.positions, direct.positions[:240])
     out = tmp_path / "joints.csv"
