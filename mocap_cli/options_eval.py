@@ -18,7 +18,7 @@ def register(esub) -> None:
                         description="The studio options solved with each left out in turn on every take: each elbow "
                                     "hidden from 1 s, and 0.1 s in every 0.5 s; each arm lost 1 s in every 2 s; each "
                                     "knee and ankle hidden from 1 s; the thesis's worst case; the pelvis lost 1 s in "
-                                    "every 2 s. The hidden joints against the localization of the complete take; an "
+                                    "every 2 s. The hidden joints against the studio options' solve of the complete take; an "
                                     f"option is kept where leaving it out makes some case worse by over {KEEP_MM:g} mm.")
     add_take_args(r)
     r.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: one per core)")
@@ -60,7 +60,7 @@ def render(rows: list[dict]) -> str:
     base = {(r["take"], r["case"]): r["mean_mm"] for r in rows if r["option_left_out"] == STUDIO}
     lines = ["Each studio option left out in turn: change of the hidden joints' mean error (mm) on each take and case "
              f"against all options on; kept where some case grows worse by over {KEEP_MM:g} mm.", "",
-             "| left out | cases worse by > 2 mm | largest worsening | largest improvement | summed change mm | |",
+             f"| left out | cases worse by > {KEEP_MM:g} mm | largest worsening | largest improvement | summed change mm | |",
              "|---|---|---|---|---|---|"]
     for option in LEFT_OUT:
         delta = {(r["take"], r["case"]): r["mean_mm"] - base[r["take"], r["case"]]

@@ -289,4 +289,14 @@ class GapFiller:
         return any(f.rigid is not None for f in self.limbs.values())
 
     def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:
-        return {limb: f.fill(positions, frames, status, time_s) for limb, f in self.limbs.items()}
+        """One frame in place, as the graph fills it: the torso first, then each limb from the torso's output
+        (the limb nodes run side by side: none sees another's filled joints)."""
+        torso, *limbs = self.limbs.values()
+        stats = {"torso": torso.fill(positions, frames, status, time_s)}
+        given = positions.copy(), frames.copy(), status.copy()
+        for f in limbs:
+            p, r, s = (a.copy() for a in given)
+            stats[f.limb] = f.fill(p, r, s, time_s)
+            idx = f.joints
+            positions[idx], frames[idx], status[idx] = p[idx], r[idx], s[idx]
+        return stats

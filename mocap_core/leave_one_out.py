@@ -1,5 +1,6 @@
 """What each studio option adds (``mocap eval options``): the studio options solved with each left out in turn, on
-the cases a studio's occlusions make, the hidden joints measured against the localization of the complete take.
+the cases a studio's occlusions make, the hidden joints measured against the studio options' own solve of the complete
+take (their rigid chains move located joints too, as ``mocap eval rigid`` measures them).
 
 An option is worth keeping where leaving it out makes some case on some take worse by more than ``KEEP_MM``.
 """
@@ -9,8 +10,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mocap_core.experiments import landmarks_of, localize_take
-from mocap_core.fit.compare import cases as rigid_cases
+from mocap_core.experiments import landmarks_of
+from mocap_core.fit.compare import cases as rigid_cases, solve
 from mocap_core.fill_options import FillOptions, HipOptions
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.presets import PRESETS, Options
@@ -18,7 +19,7 @@ from mocap_core.profiles import Profile
 from mocap_core.recordings import Recording
 from mocap_core.skeleton import INDEX
 
-KEEP_MM = 2.0
+KEEP_MM = 5.0
 STUDIO = "studio"
 
 
@@ -92,7 +93,7 @@ def cases(profile: Profile, rec: Recording) -> list[Case]:
 
 def score(rec: Recording, profile: Profile, options: list[str]) -> dict[str, dict[str, float]]:
     """{option: {case: mean mm of the hidden joints}} on one take (``studio``: every option on)."""
-    reference = localize_take(rec, profile)[0]
+    reference = solve(STUDIO, rec.positions.astype(np.float64), rec, profile)[0]
     col = list(profile.columns(rec.labels))
     out = {}
     for option in options:

@@ -37,15 +37,17 @@ class SolvedChunk:
 class SkeletonPipeline:
     def __init__(self, profile: Profile, labels: list[str], solver: str = "ccd",
                  params: SolverParams | None = None, constraints: Constraints | None = None,
-                 fill_gaps: bool = True, rate_hz: float | None = None, options: Options | str = "thesis"):
+                 fill_gaps: bool = True, rate_hz: float | None = None, options: Options | str | None = None):
         """``options``: the fills beyond the thesis, a preset's name (mocap_core.presets: ``studio``, the hips fitted
         to the body when all are lost, lost forearm and foot landmarks rebuilt, lost knees and ankles from the pose
         memory, bony pairs whose spacing jumped dropped, swivel, segment carry, the blends at loss and
-        re-acquisition) or both stages' options; ``fill_gaps`` false: none, and no IK. ``rate_hz``: the take's
-        frame rate, which paces the blends (else blend.DEFAULT_FRAME_S a frame)."""
+        re-acquisition, the rigid chains; the default) or both stages' options; ``fill_gaps`` false: none (the
+        thesis's hips, unless ``options`` says), and no IK. ``rate_hz``: the take's frame rate, which paces the
+        blends (else blend.DEFAULT_FRAME_S a frame)."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
         self.landmark_map = profile.resolve(labels)
         self.gate = MarkerGate()
+        options = options or ("studio" if fill_gaps else "thesis")
         options = PRESETS[options] if isinstance(options, str) else options
         hips = options.hips
         self.hips = HipInterpolator(when_lost=hips.when_lost)

@@ -26,7 +26,7 @@ PRESETS: dict[str, Options] = {"thesis": Options(), "studio": Options(STUDIO_HIP
 def with_preset(stage: str, params, leave: tuple[str, ...] = ()):
     """A node's raw params with its preset's values for ``stage`` ("hips", "ik") under the ones it gives, but for
     those named in ``leave`` (which do nothing where the node runs)."""
-    if not isinstance(params, dict) or params.get("preset", "thesis") not in PRESETS:
+    if not isinstance(params, dict) or params.get("preset", "studio") not in PRESETS:
         return params  # pydantic says what is wrong
-    preset = getattr(PRESETS[params.get("preset", "thesis")], stage).model_dump(exclude=set(leave))
+    preset = getattr(PRESETS[params.get("preset", "studio")], stage).model_dump(exclude=set(leave))
     return {**preset, **params}

@@ -7,8 +7,10 @@ as close as can be to where they were placed, a located joint counting more than
 frame is turned by the least rotation that points it along its new direction, so its twist is kept.
 
 The subject is the calibrated one (``mocap calibrate``, or ``mocap solve``'s calibration of the whole take) or,
-until one is given, what the limb learned so far: each bone's mean length while both its joints were located
-(LimbFiller.lengths), and the first joint's mean place in its parent's frame.
+until one is given, the one calibrated from the stream so far as a take's is calibrated (fit.calibration.LiveBones:
+the joints' median places in their parents' bone frames, left and right bones of one length), its medians
+re-taken one joint at a time so that every bone is new each second. Until a bone is calibrated it keeps this
+frame's length.
 
 The fit is block coordinate descent: one bone's best direction, the others held, is the weighted mean of where the
 joints after it want it (exact for that bone); a few sweeps down the chain settle a limb of four or five bones.
@@ -20,17 +22,18 @@ import math
 import numpy as np
 from numba import njit
 
-from mocap_core import analytic_fill as af
 from mocap_core.analytic_fill import all_finite
 from mocap_core.fill_units import LimbFill, LimbFrame, switch
-from mocap_core.ik.kernels import mm, mtv, mv, rotation_between
-from mocap_core.skeleton import END_SITES, LIMBS, LOCATED, MISSING
+from mocap_core.fit.calibration import LiveBones
+from mocap_core.ik.kernels import mm, mv, rotation_between
+from mocap_core.skeleton import END_SITES, ESTIMATED, LIMBS, LOCATED, MISSING
 
 RIGID_HELP = ("beyond the thesis: each limb output as the subject's rigid chain, its bones at their calibrated (or, "
-              "until calibrated, learned) lengths, fitted to the joints placed this frame")
+              "until one is given, calibrated from the stream) lengths, fitted to the joints placed this frame")
 # How much an estimated or held joint counts against a located one where the chain cannot meet both.
 ESTIMATED_WEIGHT = 0.3
 SWEEPS = 4
+RETAKE_S = 1.0  # every bone calibrated from the stream is re-taken this often
 
 
 class RigidChain(LimbFill):
@@ -39,35 +42,59 @@ class RigidChain(LimbFill):
     def __init__(self, limb, options):
         super().__init__(limb, options)
         n = len(limb.joints)
-        self.fixed = np.full(n, np.nan)        # each bone's length (k to k + 1) from a subject; NaN: learned
-        self.root_fixed = np.full(3, np.nan)   # the first joint in its parent's frame from a subject
-        self.root_sum = np.zeros(4)            # its running sum (x, y, z, count) while both are located
+        self.offsets = np.full((n, 3), np.nan)       # each joint in its parent's bone frame; NaN: not calibrated
+        self.rest = np.tile(np.eye(3), (n, 1, 1))    # and its bone frame's typical turn from its parent's
         self.end_site = np.array([name in END_SITES for name in LIMBS[limb.limb]])
-        self._bones = (limb.lengths, self.fixed, self.root_sum, self.root_fixed)  # (as the kernel takes them)
+        mirrored = () if limb.other is None else limb.other
+        self.live: LiveBones | None = LiveBones(np.concatenate([limb.joints, mirrored]))
+        self.wait = 0                                 # frames until the next joint's re-take
 
     def use(self, subject) -> None:
         """Take the bones from a calibrated subject (mocap_core.fit.subject.Subject): they stay as it has them."""
+        self.live = None
+        self._take(subject.offsets, subject.known)
+        self.rest[:] = subject.rest[self.limb.joints]
+
+    def _take(self, offsets: np.ndarray, known: np.ndarray) -> None:
         idx = self.limb.joints
-        if subject.known[idx[0]]:
-            self.root_fixed[:] = subject.offsets[idx[0]]
-        lengths = subject.lengths()
-        for k in range(len(idx) - 1):
-            self.fixed[k] = lengths[idx[k + 1]] if subject.known[idx[k + 1]] else np.nan
+        self.offsets[:] = np.where(known[idx, None], offsets[idx], np.nan)
+
+    def before(self, frame: LimbFrame) -> None:
+        live = self.live  # (learns from the joints as located, before any fill moves them)
+        if live is not None:
+            live.add(frame.skeleton)
+            self.wait -= 1
+            if self.wait <= 0:
+                self.wait = self.limb.clock.frames(RETAKE_S / len(live.joints))
+                if live.retake():
+                    self._take(live.offsets, live.known)
 
     def after(self, frame: LimbFrame) -> None:
-        rigid_fit(frame.skeleton, self.limb.joints, self.limb.parent_of_root, self.end_site, self._bones)
+        rigid_fit(frame.skeleton, self.limb.joints, self.limb.parent_of_root, self.end_site, self.offsets,
+                  self.rest)
 
 
 @njit(cache=True)
-def rigid_fit(skeleton, idx, parent, end_site, bones):
+def rigid_fit(skeleton, idx, parent, end_site, offsets, rest):
     """The limb's joints ``idx`` of ``skeleton`` (positions, frames, status) replaced, in place, by the rigid chain
-    fitted to them, up to its first missing joint. ``bones``: (learned (n, 2) length sums and counts, fixed (n,)
-    lengths or NaN, the first joint's learned offset (sum xyz, count), its fixed offset or NaN)."""
+    fitted to them. ``offsets``: (n, 3) each joint in its parent's bone frame (NaN: not calibrated; the bone keeps
+    this frame's length); ``rest``: (n, 3, 3) its bone frame's typical turn from its parent's. A calibrated joint
+    that nothing placed this frame is put where the subject has it (estimated); the chain ends at the first joint
+    neither placed nor calibrated."""
     positions, frames, status = skeleton
-    learned, fixed, root_sum, root_fixed = bones
     n = idx.shape[0]
     m = 0
-    while m < n and status[idx[m]] != MISSING and all_finite(positions[idx[m]]):
+    while m < n:
+        j = idx[m]
+        if status[j] == MISSING or not all_finite(positions[j]):
+            up = parent if m == 0 else idx[m - 1]
+            if m > 0 and not all_finite(frames[up]):  # (a bone frame its lost end left unknown: its typical turn)
+                frames[up] = mm(frames[parent if m == 1 else idx[m - 2]], rest[m - 1])
+            if not (all_finite(offsets[m]) and all_finite(frames[up]) and all_finite(positions[up])):
+                break
+            positions[j] = positions[up] + mv(frames[up], offsets[m])
+            frames[j] = mm(frames[up], rest[m])
+            status[j] = ESTIMATED
         m += 1
     if m == 0:
         return
@@ -75,10 +102,8 @@ def rigid_fit(skeleton, idx, parent, end_site, bones):
     for k in range(m):
         P[k] = positions[idx[k]]
     R_parent = frames[parent].copy()
-    if all_finite(R_parent) and all_finite(positions[parent]):
-        root = _root_offset(positions, status, idx[0], parent, R_parent, root_sum, root_fixed)
-        if all_finite(root):
-            P[0] = positions[parent] + mv(R_parent, root)
+    if all_finite(R_parent) and all_finite(positions[parent]) and all_finite(offsets[0]):
+        P[0] = positions[parent] + mv(R_parent, offsets[0])
     T = np.empty((m, 3))   # where the joints were placed: the targets
     w = np.empty(m)
     for k in range(m):
@@ -89,7 +114,9 @@ def rigid_fit(skeleton, idx, parent, end_site, bones):
     for k in range(m - 1):
         bone = T[k + 1] - T[k]
         size = math.sqrt(bone[0] * bone[0] + bone[1] * bone[1] + bone[2] * bone[2])
-        L[k] = fixed[k] if np.isfinite(fixed[k]) else af._length(learned, k, size)
+        known = offsets[k + 1]
+        L[k] = math.sqrt(known[0] * known[0] + known[1] * known[1] + known[2] * known[2]) if all_finite(known) \
+            else size
         U[k] = bone / size if size > 1e-9 else np.array([0.0, 1.0, 0.0])
     _place(P, L, U)
     for _ in range(SWEEPS):
@@ -121,19 +148,3 @@ def _place(P, L, U):
     """The chain's joints from its first, each bone at its length along its direction."""
     for k in range(1, P.shape[0]):
         P[k] = P[k - 1] + L[k - 1] * U[k - 1]
-
-
-@njit(cache=True)
-def _root_offset(positions, status, root, parent, R_parent, root_sum, root_fixed):
-    """The limb's first joint in its parent's bone frame: the subject's, else the mean of where it was while both
-    were located (learning this frame's), else this frame's."""
-    here = mtv(R_parent, positions[root] - positions[parent])
-    if np.isfinite(root_fixed[0]):
-        return root_fixed.copy()
-    if status[root] == LOCATED and status[parent] == LOCATED and all_finite(here):
-        for c in range(3):
-            root_sum[c] += here[c]
-        root_sum[3] += 1
-    if root_sum[3] >= af.MIN_SAMPLES:
-        return root_sum[:3] / root_sum[3]
-    return here

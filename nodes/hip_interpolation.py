@@ -33,7 +33,7 @@ class Params(HipOptions):
     model_config = ConfigDict(extra="forbid")
     profile: str = Field(AUTO, description="marker-set profile name (profiles/) or YAML path; auto: the shipped "
                                            "one the stream's labels fit")
-    preset: Preset = Field("thesis", description=PRESET_HELP)
+    preset: Preset = Field("studio", description=PRESET_HELP)
     max_step_m: float = Field(0.02, gt=0, description="largest per-frame move of a predicted pelvis marker")
 
     @model_validator(mode="before")

@@ -27,7 +27,7 @@ class Params(FillOptions):
     """The limb, the solver and its limits, and the fills beyond the thesis (FillOptions)."""
     model_config = ConfigDict(extra="forbid")
     limb: Literal[tuple(LIMBS)]  # type: ignore[valid-type]  (the stages of mocap_core.skeleton)
-    preset: Preset = Field("thesis", description=PRESET_HELP)
+    preset: Preset = Field("studio", description=PRESET_HELP)
     solver: str = Field("ccd", description=f"one of {', '.join(SOLVERS)}")
     constraints: bool = True
     constraints_file: str | None = None

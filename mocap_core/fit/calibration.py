@@ -15,11 +15,13 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 
 from mocap_core.fit.subject import Subject
+from mocap_core.ik.kernels import mtv
 from mocap_core.localization import Localizer
 from mocap_core.profiles import Profile
-from mocap_core.skeleton import END_SITES, INDEX, JOINTS, PARENT_INDEX
+from mocap_core.skeleton import END_SITES, INDEX, JOINTS, LOCATED, PARENT_INDEX
 
 
 @dataclass
@@ -88,15 +90,74 @@ def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
         if len(turns):
             u, _, vt = np.linalg.svd(turns.mean(axis=0))
             rest[j] = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
-    if s.symmetric:
-        for left, right in _PAIRS:
-            if known[left] and known[right]:
-                a, b = np.linalg.norm(offsets[left]), np.linalg.norm(offsets[right])
-                if a > 0 and b > 0:
-                    mean = (a + b) / 2
-                    offsets[left] *= mean / a
-                    offsets[right] *= mean / b
-    return offsets, known, rest
+    return (symmetric(offsets, known) if s.symmetric else offsets), known, rest
+
+
+def symmetric(offsets: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The offsets with each left and right bone scaled to their mean length where both are known."""
+    out = offsets.copy()
+    for left, right in _PAIRS:
+        if known[left] and known[right]:
+            a, b = np.linalg.norm(offsets[left]), np.linalg.norm(offsets[right])
+            if a > 0 and b > 0:
+                out[left] *= (a + b) / 2 / a
+                out[right] *= (a + b) / 2 / b
+    return out
+
+
+class LiveBones:
+    """``calibrate_bones`` over a stream, for some joints (a limb's and its mirror's): each joint's median place in
+    its parent's bone frame over the frames where both were located, left and right bones of one length. The frames
+    are kept spread evenly over all seen so far (at most ``most``: when full, every other is let go and every other
+    frame kept from then on), so the bones converge to the whole stream's as a take's calibration does. The medians
+    are re-taken one joint at a time (``retake``), so calibrating holds no frame."""
+
+    def __init__(self, joints: np.ndarray, settings: CalibrationSettings | None = None, most: int = 2000):
+        self.s = settings or CalibrationSettings()
+        self.joints = np.asarray(joints, np.int64)
+        self.parents = PARENT_INDEX[self.joints]
+        self.local = np.full((most - most % 2, len(self.joints), 3), np.nan)
+        self.kept, self.seen, self.stride, self.turn = 0, 0, 1, 0
+        self.raw = np.zeros((len(JOINTS), 3))             # each joint's median offset so far
+        self.known = np.zeros(len(JOINTS), bool)
+        self.offsets = np.zeros((len(JOINTS), 3))          # and with left and right bones of one length
+
+    def add(self, skeleton: tuple) -> None:
+        """One frame (positions, frames, status of the whole skeleton)."""
+        if self.seen % self.stride == 0:
+            if self.kept == len(self.local):
+                self.kept //= 2
+                self.local[:self.kept] = self.local[::2].copy()
+                self.stride *= 2
+            if self.seen % self.stride == 0:
+                _local_offsets(skeleton, self.joints, self.parents, self.local[self.kept])
+                self.kept += 1
+        self.seen += 1
+
+    def retake(self) -> bool:
+        """The next joint's median again; True when a round of all of them ended (``offsets`` then new)."""
+        k, j = self.turn, self.joints[self.turn]
+        self.turn = (k + 1) % len(self.joints)
+        column = self.local[:self.kept, k]
+        ok = np.isfinite(column[:, 0])
+        if ok.sum() >= self.s.min_frames:
+            self.raw[j], self.known[j] = np.median(column[ok], axis=0), True
+        if self.turn:
+            return False
+        self.offsets = symmetric(self.raw, self.known) if self.s.symmetric else self.raw.copy()
+        return True
+
+
+@njit(cache=True)
+def _local_offsets(skeleton, joints, parents, out):
+    """Each joint's place in its parent's bone frame where both are located, NaN where not."""
+    positions, frames, status = skeleton
+    for k in range(joints.shape[0]):
+        j, p = joints[k], parents[k]
+        if status[j] == LOCATED and status[p] == LOCATED:
+            out[k] = mtv(frames[p], positions[j] - positions[p])
+        else:
+            out[k] = np.nan
 
 
 def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.ndarray, s: CalibrationSettings):

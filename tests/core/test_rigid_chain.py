@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mocap_core.fill_options import FillOptions
-from mocap_core.fit.calibration import calibrate_bones
+from mocap_core.fit.calibration import LiveBones, calibrate_bones
 from mocap_core.fit.subject import load_subject
 from mocap_core.gapfill import LimbFiller
 from mocap_core.pipeline import SkeletonPipeline
@@ -48,15 +48,13 @@ def test_a_rigid_leg_is_output_as_it_was_placed():
         assert np.allclose(pos[[INDEX[n] for n in LEG]], placed[[INDEX[n] for n in LEG]], atol=1e-9)
 
 
-def test_a_stretched_frame_keeps_the_learned_bones():
+def test_a_stretched_frame_keeps_the_bones_calibrated_from_the_stream():
     filler = LimbFiller("left_leg", options=FillOptions(rigid=True))
-    for bend in np.linspace(0, 1.2, 60):
+    for bend in np.tile(np.linspace(0, 1.2, 60), 4):  # 2.4 s at 100 Hz: every bone re-taken twice
         filler.fill(*_leg_frame(bend))
     pos, frames, status = _leg_frame(0.6, stretch=1.3)  # ankle and foot 30 % too far, as one bad frame
     filler.fill(pos, frames, status)
-    learned = filler.lengths[:-1, 0] / filler.lengths[:-1, 1]  # (this frame's counted in: 0.4 x 60 + 0.52, / 61)
-    assert np.allclose(_lengths(pos, LEG[1:]), learned, atol=1e-9)
-    assert np.allclose(learned, [0.4, 0.4 + 0.12 / 61, 0.05 + 0.015 / 61, 0.1])
+    assert np.allclose(_lengths(pos, LEG[1:]), [0.4, 0.4, 0.05, 0.1], atol=1e-9)  # (medians: the bad frame is out)
     # the bone frames point along the bones they start
     for a, b in zip(LEG[1:3], LEG[2:4]):
         bone = pos[INDEX[b]] - pos[INDEX[a]]
@@ -129,3 +127,64 @@ def test_the_rigid_chain_is_a_registered_fill(limb):
     filler = LimbFiller(limb, options=FillOptions(rigid=True))
     assert isinstance(filler.rigid, RigidChain)
     assert LimbFiller(limb).rigid is None
+
+
+def test_live_bones_keep_frames_spread_over_the_whole_stream():
+    """Past its capacity the buffer lets every other frame go: what is kept stays evenly spread from the first frame
+    to the last, so the medians are the whole stream's, not its beginning's."""
+    live = LiveBones(np.array([INDEX["knee_l"]]), most=10)
+    for bend in np.linspace(0, 1.0, 80):  # the knee's place in the hip's frame turns with the bend
+        live.add(_leg_frame(bend))
+    kept = live.local[:live.kept, 0]
+    assert live.stride == 8 and live.kept == 10
+    seen = np.array([_leg_frame(b)[0][INDEX["knee_l"]] - [0.1, 0, 0.9] for b in np.linspace(0, 1.0, 80)])
+    assert np.allclose(kept, seen[::8])
+
+
+def test_a_stream_calibrates_the_bones_a_take_calibrates():
+    """Live (the graph's nodes, mocap solve with calibrate false): after 20 s of a real take every bone is within 2 %
+    of the bones calibrated from the complete take, and no frame lost a joint while it calibrated."""
+    rec = read_recording(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat"), "dance1")
+    prof = load_profile("dance28")
+    pipe = SkeletonPipeline(prof, rec.labels, options="studio", rate_hz=rec.rate_hz)
+    take = pipe.calibrate(rec.positions)
+    first = rec.positions[:int(20 * rec.rate_hz)]
+    status = np.concatenate([c.status for c in pipe.run(first, calibrate=False)])
+    located = np.concatenate([c.status for c in SkeletonPipeline(prof, rec.labels, fill_gaps=False).run(first)])
+    assert not ((located == Status.LOCATED) & (status == Status.MISSING)).any()
+    for limb in pipe.filler.limbs.values():
+        for j, offset in zip(limb.joints, limb.rigid.offsets):
+            if take.known[j] and take.lengths()[j] > 0.01:
+                length = np.linalg.norm(offset)
+                assert abs(length / take.lengths()[j] - 1) < 0.02, (JOINTS[j], length, take.lengths()[j])
+
+
+@pytest.mark.parametrize("take,variant", [(t, v) for t in ("vicon", "karate", "walk1") for v in ("no_tracking",
+                                                                                                   "no_hands")])
+def test_a_stripped_marker_set_keeps_every_joint_and_every_bone(take, variant):
+    """A profile without its ``tracking:`` list, or a take without its hand markers: every joint the localization
+    locates in some frame is output in every frame (the subject places what nothing else did), every bone rigid."""
+    files = {"vicon": ("12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d", None, "vicon53"),
+             "karate": ("08_cmu_135_02_karate_kata.c3d", None, "cmu41"),
+             "walk1": ("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat", "walk1", "dance28")}
+    file, name, profile = files[take]
+    rec = read_recording(data_file(file), name)
+    rec = rec.slice(0, min(rec.n_frames, int(10 * rec.rate_hz)))
+    prof = load_profile(profile)
+    markers = rec.positions.copy()
+    if variant == "no_tracking":
+        prof = prof.model_copy(update={"tracking": {}})
+    else:
+        col = list(prof.columns(rec.labels))
+        hands = [col.index(x) for lm in prof.landmarks if "_HM" in lm for x in prof.markers_of(lm) if x in col]
+        assert hands
+        markers[:, hands] = np.nan
+    chunks = list(SkeletonPipeline(prof, rec.labels, rate_hz=rec.rate_hz).run(markers))
+    pos, status = np.concatenate([c.positions for c in chunks]), np.concatenate([c.status for c in chunks])
+    located = np.concatenate([c.status for c in SkeletonPipeline(prof, rec.labels, fill_gaps=False).run(markers)])
+    ever = (located == Status.LOCATED).any(axis=0)
+    assert (status[:, ever] != Status.MISSING).all(), [JOINTS[j] for j in np.flatnonzero(ever)
+                                                       if (status[:, j] == Status.MISSING).any()]
+    lengths = np.linalg.norm(pos[:, 1:] - pos[:, PARENT_INDEX[1:]], axis=-1)[:, ever[1:]]
+    typical = np.median(lengths, axis=0)
+    assert np.abs(lengths - typical).max() < 1e-6

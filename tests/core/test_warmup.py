@@ -61,11 +61,11 @@ def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
     from nodes.registry import load_kind
 
     gapfill = load_kind("ik_gapfill")
-    assert gapfill.kernels(gapfill.Params(limb="left_arm", solver="fabrik")) == ("solvers",)
-    assert gapfill.kernels(gapfill.Params(limb="left_arm", preset="studio"))[0] == "beyond"
+    assert gapfill.kernels(gapfill.Params(limb="left_arm", preset="thesis", solver="fabrik")) == ("solvers",)
+    assert gapfill.kernels(gapfill.Params(limb="left_arm"))[0] == "beyond"
     hips = load_kind("hip_interpolation")
-    assert hips.kernels(hips.Params()) == ()
-    assert set(hips.kernels(hips.Params(preset="studio"))) == {"rebuild", "pose_memory", "pair_guard"}
+    assert hips.kernels(hips.Params(preset="thesis")) == ()
+    assert set(hips.kernels(hips.Params())) == {"rebuild", "pose_memory", "pair_guard"}
     for kind in ("ik_gapfill", "hip_interpolation", "joint_localization", "skeleton_fit", "retarget"):
         cls = load_kind(kind)
         params = cls.Params(limb="torso") if kind == "ik_gapfill" else cls.Params()

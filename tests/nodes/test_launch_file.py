@@ -112,7 +112,10 @@ def test_preset_studio_is_the_gap_filling_beyond_the_thesis_and_a_param_beside_i
     # the swivel off leaves the limb memory and the body model, which steer it, idle: refused, saying so
     with pytest.raises(ValueError, match="limb_memory and body_model steer the swivel, which is off"):
         IkParams.model_validate({"limb": "left_arm", "preset": "studio", "swivel": False})
-    assert IkParams.model_validate({"limb": "torso"}).swivel is False          # the thesis's method by default
+    # the studio options by default (as mocap solve), the thesis's method by name
+    assert FillOptions.of(IkParams.model_validate({"limb": "left_arm"})) == STUDIO
+    assert FillOptions.of(IkParams.model_validate({"limb": "left_arm", "preset": "thesis"})) == FillOptions()
+    assert HipParams.model_validate({}) == HipParams.model_validate({"preset": "studio"})
     # the body and end models learn from the mirrored limb: the torso's preset leaves them out, a param is refused
     assert FillOptions.of(IkParams.model_validate({"limb": "torso", "preset": "studio"})) == STUDIO.for_limb("torso")
     assert not STUDIO.for_limb("torso").body_model and not STUDIO.for_limb("torso").end_model
