@@ -327,6 +327,8 @@ class Launcher:
             if p.popen is None:
                 if p.restart_at is not None and now >= p.restart_at:
                     p.restart_at = None
+                    for n in p.nodes:
+                        n.spec = n.spec.model_copy(update={"restart": p.restarts})
                     self._respawn(p)
                     self._write_registry()
                     log.warning("restarted %s (restart #%d, pid %d)", p.label, p.restarts, p.popen.pid)

@@ -87,7 +87,8 @@ class FrameJoiner:
             if not (done or ((overdue or superseded) and p.torso is not None)):
                 if p.torso is None and (self.torso_up_to > f or now_s - p.arrived_s >= TORSO_LOST_S):
                     del self.pending[f]  # its torso was lost: nothing to join the limbs to
-                    self.released_up_to = max(self.released_up_to, f)
+                    if f < self.torso_up_to:  # (limbs beyond every torso: a stream's before it started again)
+                        self.released_up_to = max(self.released_up_to, f)
                     continue
                 break  # keep frames in order
             out.append(self._join(f, p))

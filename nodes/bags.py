@@ -45,7 +45,7 @@ class BagMessage:
     schema: str
     data: bytes           # the exact wire payload
     log_time_ns: int      # when the recorder received it
-    publish_time_ns: int  # when the frame entered the graph (header.entry_time_ns): wall clock, as log_time
+    publish_time_ns: int  # the frame's capture time (the recorder) or entry time (bag record); else as log_time
 
 
 def piece(path: Path, k: int) -> Path:
@@ -103,6 +103,8 @@ class BagWriter:
                     publish_time_ns = decode(payload, topic).header.entry_time_ns or log_time_ns
                 except Exception:
                     pass
+        if not 0 <= publish_time_ns < 2 ** 64:  # (a capture time before zero: MCAP's times are unsigned)
+            publish_time_ns = log_time_ns
         cid = self._channel(topic, schema)
         seq = self.sequence.get(cid, 0) + 1
         self.sequence[cid] = seq

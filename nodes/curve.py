@@ -12,6 +12,7 @@ receives nothing. Copy the directory to every host of a multi-host graph (keep t
 """
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import zmq
@@ -19,16 +20,25 @@ import zmq.auth
 from zmq.auth.thread import ThreadAuthenticator
 
 
+log = logging.getLogger("mocap.curve")
+
+
 class CurveError(Exception):
     pass
 
 
 def generate(directory: str | Path) -> Path:
+    """A key directory that only its owner can read (folders 0700, secrets 0600): a secret another local user can
+    read lets them receive the stream."""
     d = Path(directory)
     (d / "authorized").mkdir(parents=True, exist_ok=True)
+    for folder in (d, d / "authorized"):
+        folder.chmod(0o700)
     zmq.auth.create_certificates(d, "server")
     client_public, _ = zmq.auth.create_certificates(d, "client")
     (d / "authorized" / "client.key").write_bytes(Path(client_public).read_bytes())
+    for secret in d.glob("*.key_secret"):
+        secret.chmod(0o600)
     return d
 
 
@@ -38,6 +48,8 @@ def _load(path: Path, secret: bool):
     public, secret_key = zmq.auth.load_certificate(str(path))
     if secret and secret_key is None:
         raise CurveError(f"{path} holds no secret key")
+    if secret and path.stat().st_mode & 0o077:
+        log.warning("CURVE secret %s can be read by other users: chmod 600 %s (and chmod 700 its folder)", path, path)
     return public, secret_key
 
 

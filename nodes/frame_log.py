@@ -22,9 +22,13 @@ class FrameLog(Node):
     timer_period_s = 0.1           # flush ten times a second rather than one write call per message
 
     def setup(self):
-        Path(self.params.path).parent.mkdir(parents=True, exist_ok=True)
-        self.file = open(self.params.path, "w")
-        self.file.write("frame,seq,publisher,schema,latency_us,estimated,held,missing,received_ns\n")
+        path = Path(self.params.path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # restarted by the launcher: go on after what the run before wrote (a launch starts the file afresh)
+        again = self.ctx.spec.restart > 0 and path.exists() and path.stat().st_size > 0
+        self.file = open(path, "a" if again else "w")
+        if not again:
+            self.file.write("frame,seq,publisher,schema,latency_us,estimated,held,missing,received_ns\n")
 
     def on_message(self, topic, msg):
         # Latency at arrival (before decoding), as a bare pyzmq sink measures it.

@@ -9,6 +9,7 @@ every piece (nodes/bags.py).
 """
 from __future__ import annotations
 
+import math
 import platform
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -57,7 +58,9 @@ class Recorder(Node):
         raise AssertionError("the recorder stores raw bytes; see on_raw")
 
     def on_raw(self, wire_topic: str, payload: bytes, msg: Message) -> None:
-        self.bag.write(wire_topic, payload, self.ctx.received_ns, int(msg.header.capture_time_s * 1e9))
+        capture_ns = msg.header.capture_time_s * 1e9
+        self.bag.write(wire_topic, payload, self.ctx.received_ns,
+                       int(capture_ns) if math.isfinite(capture_ns) else self.ctx.received_ns)
         if msg.SCHEMA == "mocap.MarkerSet":
             self.marker_set = msg
 

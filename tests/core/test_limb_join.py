@@ -90,3 +90,33 @@ def test_limbs_lagging_many_frames_behind_lose_no_frame():
             out += j.add_limb(f, 0.15 + f * 0.001, name, *limb(name, 1.0))
     out += j.release(1.0)
     assert [o.frame for o in out] == list(range(30))
+
+
+def test_a_limb_stale_from_before_a_loop_does_not_silence_the_next_loop():
+    """A take loops (frames 0-1099, then 0 again) while the left arm's node paused 0.15 s at the loop point: its last
+    frames of the first loop arrive after the second loop began. They are dropped; every frame of the second loop
+    is released once whole (none rejected as late because the stale limb's frame number was higher)."""
+    rate, j, out = 120.0, FrameJoiner(max_wait_s=0.02), []
+
+    def frame(f, t, skip=()):
+        got = j.add_torso(f, t, *torso())
+        for name in LIMBS:
+            if name not in skip:
+                got += j.add_limb(f, t, name, *limb(name, 1.0))
+        return got
+
+    for f in range(1100):
+        frame(f, f / rate, skip=("left_arm",) if f >= 1082 else ())
+    for f in range(1082, 1100):
+        j.release(1100 / rate)
+    start = 1100 / rate
+    for f in range(18):  # the second loop's first 0.15 s; the paused arm's backlog comes then
+        out += frame(f, start + f / rate, skip=("left_arm",))
+    for f in range(1082, 1100):
+        out += j.add_limb(f, start + 0.15, "left_arm", *limb("left_arm", 1.0))
+    for f in range(18):
+        out += j.add_limb(f, start + 0.15, "left_arm", *limb("left_arm", 1.0))
+    for f in range(18, 1100):
+        out += frame(f, start + f / rate)
+    second = [o.frame for o in out]
+    assert second[-1] == 1099 and sorted(set(second)) == second and len(second) >= 1090, (len(second), second[:20])

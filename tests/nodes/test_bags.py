@@ -142,6 +142,24 @@ nodes:
     assert frames == list(range(400)), g.log()
 
 
+def test_capture_times_that_run_backwards_are_recorded_whole(tmp_path):
+    """A take that loops, or a QTM that restarts its clock, stamps capture times before zero or none: every frame is
+    still written and read back (MCAP's publish time is unsigned; such a frame keeps its arrival time there)."""
+    from messages import MarkerFrame, encode
+    from nodes.bags import BagWriter
+
+    times = [1.0, 2.0, -0.5, 0.1, float("nan")]
+    writer = BagWriter(tmp_path / "t.mcap", {})
+    for f, t in enumerate(times):
+        msg = MarkerFrame(header=MarkerFrame.make_header(frame=f, capture_time_s=t), labels=["a"],
+                          positions=np.zeros((1, 3), np.float32), flags=np.zeros(1, np.uint8))
+        writer.write("markers/raw", encode(msg), 1000 + f, int(t * 1e9) if np.isfinite(t) else -1)
+    writer.close()
+    got = list(read_bag(tmp_path / "t.mcap"))
+    assert [decode(m.data, m.topic).header.frame for m in got] == list(range(len(times)))
+    assert [m.publish_time_ns for m in got] == [10 ** 9, 2 * 10 ** 9, 1002, 10 ** 8, 1004]
+
+
 def test_missing_corrupt_and_foreign_files_give_clear_errors(tmp_path):
     with pytest.raises(BagError, match="bag not found"):
         bag_info(tmp_path / "none.mcap")

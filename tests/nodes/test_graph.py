@@ -47,6 +47,20 @@ def test_killed_node_is_restarted_and_graph_resumes(tmp_path):
         assert "restarted node relay" in g.log()
 
 
+def test_a_restarted_frame_log_goes_on_after_what_it_wrote(tmp_path):
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, SMOKE.format(rate=200, frames=0, log=out)) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 20, 15, "frames through the graph")
+        old = g.node_pids()["log"]
+        before = read_frames(out)
+        os.kill(old, signal.SIGKILL)
+        wait_for(lambda: (p := g.node_pids().get("log")) != old and p, 5, "a restarted log")
+        wait_for(lambda: len(read_frames(out)) > len(before) + 20, 5, "frames after the restart")
+    lines = out.read_text().splitlines()
+    assert sum(line.startswith("frame,") for line in lines) == 1  # one header, the first run's
+    assert read_frames(out)[:len(before)] == before                  # what the first run wrote is kept
+
+
 def test_ctrl_c_stops_everything_within_two_seconds(tmp_path):
     out = tmp_path / "frames.csv"
     with launched(tmp_path, SMOKE.format(rate=200, frames=0, log=out)) as g:

@@ -161,3 +161,15 @@ def test_the_graph_registry_is_private(tmp_path, monkeypatch):
         monkeypatch.setenv("MOCAP_RUN_DIR", str(theirs))
         with pytest.raises(RegistryError, match="belongs to another user"):
             registry_dir()
+
+
+def test_generated_keys_are_readable_by_their_owner_only(tmp_path, caplog):
+    keys = curve.generate(tmp_path / "keys")
+    assert keys.stat().st_mode & 0o777 == 0o700 and (keys / "authorized").stat().st_mode & 0o777 == 0o700
+    secrets = sorted(keys.glob("*.key_secret"))
+    assert len(secrets) == 2 and all(p.stat().st_mode & 0o777 == 0o600 for p in secrets)
+    # a secret others can read still works, with a warning that says how to close it
+    secrets[0].chmod(0o644)
+    with caplog.at_level("WARNING", logger="mocap.curve"):
+        curve._load(secrets[0], secret=True)
+    assert "chmod 600" in caplog.text
