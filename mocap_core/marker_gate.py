@@ -3,8 +3,11 @@
 A marker further from the origin than ``max_distance_m``, or one that moved faster than ``max_speed_m_s`` since it
 was last accepted, is taken as missing in that frame (a glitch of the cameras, a corrupt packet). The fastest
 marker in the shared recordings moves at 17 m/s (a strike), so the default of 50 m/s keeps every real
-motion. A marker whose new track goes on consistently is accepted again on the next frame: it is checked against
-where it was last rejected too, so a wrong first position (a glitch in the first frame) is left after one frame.
+motion. A frame stamped at or before the last (a duplicated or replayed time) counts as one frame interval later.
+A marker with no place accepted yet (the first frame, its first appearance) is accepted within ``max_body_m`` of
+the frame's median marker (a body's markers lie within 1.4 m of it in the shared recordings). A marker whose new
+track goes on consistently is accepted again on the next frame: it is checked against where it was last rejected
+too, so a prop away from the body, or a marker that really moved, is kept from its second frame.
 Every stage that learns from the markers sits behind this gate (the hip stage, the fit), so one glitched frame
 cannot corrupt what they learn for the rest of the session.
 """
@@ -19,10 +22,13 @@ import numpy as np
 class MarkerGate:
     max_speed_m_s: float = 50.0
     max_distance_m: float = 1000.0
+    max_body_m: float = 3.0
     last: np.ndarray | None = None          # (M, 3) where each marker was last accepted
     last_t: np.ndarray | None = None        # (M,) and when
     rejected: np.ndarray | None = None      # (M, 3) where it was last rejected
     rejected_t: np.ndarray | None = None
+    last_time_s: float = np.nan             # the last frame's time
+    frame_s: float = 0.01                   # the last interval between frames (until two frames say)
     dropped: int = field(default=0)         # markers dropped so far
 
     def filter(self, markers: np.ndarray, time_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -33,9 +39,20 @@ class MarkerGate:
             self.last, self.last_t = np.full((m, 3), np.nan), np.full(m, np.nan)
             self.rejected, self.rejected_t = np.full((m, 3), np.nan), np.full(m, np.nan)
         seen = np.isfinite(x).all(axis=1)
+        if np.isfinite(self.last_time_s):
+            if time_s > self.last_time_s:
+                self.frame_s = min(time_s - self.last_time_s, 1.0)
+            else:  # (no time, or at or before the last frame's: one interval on)
+                time_s = self.last_time_s + self.frame_s
+        elif not np.isfinite(time_s):
+            time_s = 0.0
+        self.last_time_s = time_s
         with np.errstate(invalid="ignore", over="ignore"):
             bad = seen & ~(np.abs(x) <= self.max_distance_m).all(axis=1)
-            fast = seen & ~bad & ~self._reachable(x, self.last, self.last_t, time_s, True)
+            near = seen & ~bad
+            if near.sum() >= 3:
+                near &= np.linalg.norm(x - np.median(x[near], axis=0), axis=1) <= self.max_body_m
+            fast = seen & ~bad & ~self._reachable(x, self.last, self.last_t, time_s, near)
             fast &= ~self._reachable(x, self.rejected, self.rejected_t, time_s, False)  # not a track going on
         drop = bad | fast
         self.rejected[fast], self.rejected_t[fast] = x[fast], time_s
@@ -52,9 +69,9 @@ class MarkerGate:
             out[f] = self.filter(markers[f], (start + f) * frame_s)[0]
         return out
 
-    def _reachable(self, x, before, before_t, time_s, unknown: bool) -> np.ndarray:
-        """Markers within max speed of where they were at ``before_t``; ``unknown`` for those with no such place."""
-        dt = time_s - before_t
+    def _reachable(self, x, before, before_t, time_s, unknown) -> np.ndarray:
+        """Markers within max speed of where they were at ``before_t``; ``unknown`` (bool, or per marker) for those
+        with no such place."""
         step = np.linalg.norm(x - before, axis=1)
-        ok = step <= self.max_speed_m_s * np.where(dt > 0, dt, np.inf)
+        ok = step <= self.max_speed_m_s * (time_s - before_t)
         return np.where(np.isfinite(before_t), ok, unknown)
