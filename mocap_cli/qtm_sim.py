@@ -7,8 +7,8 @@ again with event 8). A malformed command gets an Error packet; a client that doe
 protocol is disconnected; the server itself never stops for a client's sake.
 
 Fault injection for tests: ``--drop-after N`` closes each client after N data frames,
-``--stall-at N --stall-s S`` freezes the clock once at frame N, ``--hide LABEL:FIRST-LAST`` hides
-a marker for a range of frames (repeatable).
+``--stall-at N --stall-s S`` freezes the clock once at frame N, ``--no-3d-from N`` sends frames with no
+3D data from frame N on, ``--hide LABEL:FIRST-LAST`` hides a marker for a range of frames (repeatable).
 """
 from __future__ import annotations
 
@@ -37,6 +37,7 @@ class Faults:
     drop_after: int = 0
     stall_at: int = -1
     stall_s: float = 0.0
+    no_3d_from: int = -1
     hide: list[tuple[str, int, int]] = field(default_factory=list)
 
 
@@ -96,6 +97,8 @@ class QtmEmulator:
                 log.info("looping: measurement restarted")
 
     def frame_bytes(self, index: int, components: tuple[str, ...]) -> bytes:
+        if 0 <= self.faults.no_3d_from <= index:
+            components = ()  # (a QTM whose 3D tracking stopped: frames with no component)
         return qp.data_packet(self.rec.first_frame + index, int(round(index / self.rec.rate_hz * 1e6)),
                               self.positions_mm[index], components)
 
@@ -289,6 +292,8 @@ def add_parser(sub) -> None:
     s.add_argument("--drop-after", type=int, default=0, metavar="N", help="fault: close each client after N frames")
     s.add_argument("--stall-at", type=int, default=-1, metavar="FRAME", help="fault: freeze the clock at this frame")
     s.add_argument("--stall-s", type=float, default=1.0, help="fault: how long the stall lasts")
+    s.add_argument("--no-3d-from", type=int, default=-1, metavar="FRAME",
+                   help="fault: frames from this one on carry no 3D data")
     s.add_argument("--hide", action="append", default=[], metavar="LABEL:FIRST-LAST",
                    help="fault: hide a marker for a frame range (repeatable)")
     s.set_defaults(func=run)
@@ -304,7 +309,7 @@ def run(args) -> int:
             raise SystemExit(f"--hide {h!r}: expected LABEL:FIRST-LAST, e.g. --hide LELB:100-200") from None
         hide.append((label, first, last))
     rec = read_take(args.file)
-    faults = Faults(args.drop_after, args.stall_at, args.stall_s, hide)
+    faults = Faults(args.drop_after, args.stall_at, args.stall_s, args.no_3d_from, hide)
     emulator = QtmEmulator(rec, args.rate, args.loop, args.up_axis or recording_up_axis(rec), faults)
     asyncio.run(serve(emulator, args.host, args.port, args.ready_file))
     return 0

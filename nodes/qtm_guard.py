@@ -7,13 +7,12 @@ client at 100 % CPU with no error. ``GuardedReceiver`` checks the framing first:
 packet's component table; anything else is handed to qtm-rt unchanged. On a bad packet it calls ``on_bad`` (the
 ingest closes the connection and reconnects) and drops what it buffered.
 
-It also notes when the last data packet came and whether QTM said the stream ended (NoMoreData, or the events
-that stop it), so a watchdog can tell a stall from a QTM that stopped on purpose.
+It also notes whether QTM said the stream ended (NoMoreData, or the events that stop it), so a watchdog can tell a
+stall from a QTM that stopped on purpose.
 """
 from __future__ import annotations
 
 import struct
-import time
 from typing import Callable
 
 from qtm_rt.packet import QRTPacketType, RTComponentData, RTDataQRTPacket, RTheader
@@ -50,7 +49,6 @@ class GuardedReceiver(Receiver):
     def __init__(self, handlers, on_bad: Callable[[str], None]):
         super().__init__(handlers)
         self.on_bad = on_bad
-        self.last_data = time.monotonic()
         self.stopped = False       # QTM said the stream ended: silence is expected, not a stall
         self.failed = False
 
@@ -70,7 +68,7 @@ class GuardedReceiver(Receiver):
                 body = buffer[RTheader.size:size]
                 if type_ == QRTPacketType.PacketData.value:
                     check_data_packet(body)
-                    self.last_data, self.stopped = time.monotonic(), False
+                    self.stopped = False
                 elif type_ == QRTPacketType.PacketNoMoreData.value:
                     self.stopped = True
                 elif type_ == QRTPacketType.PacketEvent.value and body[:1] and body[0] in STOP_EVENTS:

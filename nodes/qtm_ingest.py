@@ -71,6 +71,7 @@ class QtmIngest(Node):
         self.stopping = threading.Event()
         self.started_ns: int | None = None
         self.stale, self.stale_logged = 0, False
+        self.last_frame_s, self.said_no_3d = time.monotonic(), False  # (of the session; the watchdog reads it)
         self.thread = threading.Thread(target=self._client_thread, name="qtm-rt", daemon=True)
         self.thread.start()
 
@@ -135,7 +136,8 @@ class QtmIngest(Node):
             try:  # (qtm_rt waits for QTM's answer to its version command without a timeout of its own)
                 conn = await asyncio.wait_for(
                     qtm_rt.connect(p.host, port=p.port, version=p.version, timeout=p.timeout_s, loop=loop,
-                                   on_disconnect=lambda exc: lost.set(), on_event=self._on_event), p.timeout_s)
+                                   on_disconnect=lambda exc, lost=lost: lost.set(),  # (this session's)
+                                   on_event=self._on_event), p.timeout_s)
             except asyncio.TimeoutError:
                 conn = None
                 for transport in loop.transports:  # (else the connection given up on stays open)
@@ -160,6 +162,7 @@ class QtmIngest(Node):
                     self.log.info("QTM %s:%d: %d labels at %.0f Hz%s", p.host, p.port, len(labels), rate,
                                   " (labels changed)" if was_connected and labels != self.labels else "")
                 self.inbox.put(("set", (labels, rate, up)))
+                self.last_frame_s, self.said_no_3d = time.monotonic(), False  # (the watchdog counts from here)
                 await conn.stream_frames(frames=p.frames, components=["3d"], on_packet=self._on_packet)
                 was_connected, backoff = True, MIN_BACKOFF_S
                 await self._watch(loop.receiver, lost)
@@ -174,12 +177,12 @@ class QtmIngest(Node):
                     pass
 
     async def _watch(self, receiver, lost: asyncio.Event) -> None:
-        """While streaming: until the connection is lost, or (the watchdog) no frame came for ``stall_s`` and
-        QTM did not say it stopped."""
+        """While streaming: until the connection is lost, or (the watchdog) no frame with 3D data came for
+        ``stall_s`` and QTM did not say it stopped."""
         p = self.params
         while not lost.is_set() and not self.stopping.is_set():
             await asyncio.sleep(0.05)
-            silent = time.monotonic() - receiver.last_data
+            silent = time.monotonic() - self.last_frame_s
             if p.stall_s and not receiver.stopped and silent > p.stall_s:
                 self.inbox.put(("error", ("qtm_stall", f"no frame from QTM at {p.host}:{p.port} for {silent:.1f} s; "
                                                        "reconnecting")))
@@ -201,8 +204,13 @@ class QtmIngest(Node):
         received = time.time_ns()
         try:
             comp = packet.get_3d_markers()
-            if comp is None:
+            if comp is None:  # (2D only, or nothing: the watchdog reconnects if it goes on)
+                if not self.said_no_3d:
+                    self.said_no_3d = True
+                    self.inbox.put_nowait(("error", ("qtm_no_3d", "QTM sends frames without 3D data: is its 3D "
+                                                                  "tracking running?")))
                 return
+            self.last_frame_s = time.monotonic()
             _, markers = comp
             xyz = np.array([(m.x, m.y, m.z) for m in markers], dtype=np.float64).reshape(-1, 3)
             self.inbox.put_nowait(("frame", (packet.framenumber, packet.timestamp, xyz, received)))

@@ -258,6 +258,26 @@ def test_a_stalled_qtm_is_an_error_and_frames_resume(tmp_path):
             wait_for(lambda: len(log_rows(out)) > n + 100, 30, "frames after the stall")
             beat = g.heartbeats()["qtm"]
             assert beat.errors.get("qtm_stall", 0) >= 1, beat
+            # a reconnect a second at most, not a storm (an old connection's close once ended each new session)
+            reconnects = g.log().count("lost the connection to QTM") + beat.errors.get("qtm_stall", 0)
+            assert reconnects <= 6, (reconnects, beat)
+
+
+def test_frames_without_3d_data_are_an_error_and_a_reconnect_a_second(tmp_path):
+    """QTM streams frames with no 3D component (its 3D tracking stopped): said in the heartbeat, and the watchdog
+    reconnects once a second, not in a storm (before: no frame, no error, state running)."""
+    port = free_port()
+    out = tmp_path / "raw.csv"
+    with launched(tmp_path, _ingest_to_log(port, out)) as g:
+        with emulator(tmp_path, "--loop", "--no-3d-from", "100", port=port):
+            wait_for(lambda: len(log_rows(out)) >= 50, 30, "frames from QTM")
+            beat = wait_for(lambda: (b := g.heartbeats().get("qtm")) and b.errors.get("qtm_no_3d") and b, 10,
+                            "the missing 3D data in the heartbeat")
+            stalls = beat.errors.get("qtm_stall", 0)
+            time.sleep(3.0)
+            beat = g.heartbeats()["qtm"]
+            assert 1 <= beat.errors.get("qtm_stall", 0) - stalls <= 5, beat
+            assert g.proc.poll() is None
 
 
 def test_frames_resume_within_a_second_of_qtm_coming_back(tmp_path):
