@@ -13,7 +13,7 @@ from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
-from mocap_core.landmark_needs import describe_missing, unlocatable
+from mocap_core.landmark_needs import FOLLOW_THE_NECK, describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.warmup import FIT_PARTS, ensure_compiled, pipeline_parts
 from mocap_core.skeleton import Status
@@ -107,7 +107,10 @@ def _for_actor(args, actor: str):
 def _solve(args, rec) -> dict:
     profile = profile_for(args.profile, rec.labels, log)
     profile.resolve(rec.labels)  # a label the profile names and the take lacks, or several actors: said first
-    never = describe_missing(unlocatable(frozenset(profile.landmarks)))
+    missing = unlocatable(frozenset(profile.landmarks))
+    if not (args.thesis or args.no_ik):  # (the rigid chains put a head no marker locates on the neck)
+        missing = {j: fixes for j, fixes in missing.items() if j not in FOLLOW_THE_NECK}
+    never = describe_missing(missing)
     if never and not args.allow_missing:
         raise SystemExit(f"mocap solve: profile {profile.name} cannot locate these joints in any frame:\n  "
                          + "\n  ".join(never) + "\nAdd the landmarks to the profile, or give --allow-missing to "

@@ -41,6 +41,11 @@ SITES: dict[str, str] = {
 }
 
 
+# Joints that every solve but the thesis's places where no landmark locates them: the head on the neck, as the thesis's
+# default skeleton has it (mocap_core.fit.calibration.default_head).
+FOLLOW_THE_NECK = ("head", "head_top")
+
+
 def site(landmark: str) -> str:
     stem = landmark.split("_", 1)[1] if landmark[:2] in ("L_", "R_") else landmark
     side = {"L_": "left ", "R_": "right "}.get(landmark[:2], "")

@@ -372,6 +372,8 @@ def _arm(lm, pos, frames, side, sc, r_chest, acromion_to_joint, elbow_off):
     elbow = _first2(0.5 * (hle + hme), elbow_fb)
     right = medial if side == 0 else -medial
     radial = rsp - usp
+    if vnorm(radial) < 1e-6:  # one marker at the wrist (both styloids on it): the forearm's roll from the elbow's axis
+        radial = -medial
     r_wrist = _frame_yz(hand - wrist, radial)
     pos[J[S_CLAV]], frames[J[S_CLAV]] = sc, _frame_yz(shoulder - sc, c_fwd)
     pos[J[S_SHOULDER]], frames[J[S_SHOULDER]] = shoulder, _frame_yx(elbow - shoulder, right)

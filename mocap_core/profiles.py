@@ -78,6 +78,19 @@ class Profile(BaseModel):
     def _up(cls, v: str) -> str:
         return normalize_up(v)
 
+    @field_validator("landmarks")
+    @classmethod
+    def _one_marker_wrists(cls, v: dict[str, str]) -> dict[str, str]:
+        """A set with one marker at a wrist (many running and gait sets) gives the wrist there: the styloid it lacks
+        stands where the other is, so the forearm and hand are located (about half a wrist's width off its centre)."""
+        out = dict(v)
+        for side in SIDES:
+            pair = (f"{side}_RSP", f"{side}_USP")
+            have = [lm for lm in pair if lm in v]
+            if len(have) == 1:
+                out[pair[0] if have[0] == pair[1] else pair[1]] = v[have[0]]
+        return out
+
     def where(self, landmark: str | None = None) -> str:
         line = self.lines.get(landmark) if landmark else None
         return f"profile {Path(self.source_file).name or self.name}" + (f" line {line}" if line else "")

@@ -141,6 +141,11 @@ def rigid_fit(skeleton, idx, parent, end_site, offsets, rest):
     for k in range(1, m):
         if end_site[k]:
             frames[idx[k]] = frames[idx[k - 1]]
+    for k in range(m):  # a bone frame its lost end left unknown: its parent's, turned as the subject holds it
+        if not all_finite(frames[idx[k]]):
+            up = frames[parent] if k == 0 else frames[idx[k - 1]]
+            if all_finite(up):
+                frames[idx[k]] = mm(up, rest[k])
 
 
 @njit(cache=True)

@@ -37,6 +37,9 @@ class CalibrationSettings:
 # a static marker (a starting block) rides a limb that rests on it for half the take.
 STRAY_PERCENTILE = 90
 ROTATING = np.array([j not in END_SITES for j in JOINTS])
+# Where no marker locates the head: above the neck as the thesis's default skeleton has it (H-Anim: the head 0.120 m
+# from the neck and its top 0.08 m above it, on a spine of 0.421 m from spine0 to spine3), scaled to the subject's spine.
+DEFAULT_NECK_TO_HEAD_M, DEFAULT_HEAD_TO_TOP_M, DEFAULT_SPINE_M = 0.120, 0.08, 0.421
 _PAIRS = [(INDEX[j], INDEX[j[:-1] + "r"]) for j in JOINTS if j.endswith("_l")]
 
 
@@ -90,7 +93,19 @@ def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
         if len(turns):
             u, _, vt = np.linalg.svd(turns.mean(axis=0))
             rest[j] = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    default_head(offsets, known)
     return (symmetric(offsets, known) if s.symmetric else offsets), known, rest
+
+
+def default_head(offsets: np.ndarray, known: np.ndarray) -> None:
+    """A head that follows the neck where no marker located it (in place): straight up the neck's frame."""
+    neck, head, top = INDEX["neck"], INDEX["head"], INDEX["head_top"]
+    if not known[neck] or known[head]:
+        return
+    spine = sum(np.linalg.norm(offsets[INDEX[j]]) for j in ("spine1", "spine3") if known[INDEX[j]])
+    scale = spine / DEFAULT_SPINE_M if spine > 0 else 1.0
+    offsets[head], offsets[top] = (0, DEFAULT_NECK_TO_HEAD_M * scale, 0), (0, DEFAULT_HEAD_TO_TOP_M * scale, 0)
+    known[head] = known[top] = True
 
 
 def symmetric(offsets: np.ndarray, known: np.ndarray) -> np.ndarray:
@@ -119,8 +134,9 @@ class LiveBones:
         self.local = np.full((most - most % 2, len(self.joints), 3), np.nan)
         self.kept, self.seen, self.stride, self.turn = 0, 0, 1, 0
         self.raw = np.zeros((len(JOINTS), 3))             # each joint's median offset so far
+        self.raw_known = np.zeros(len(JOINTS), bool)
+        self.offsets = np.zeros((len(JOINTS), 3))          # the bones: left and right of one length, a default head
         self.known = np.zeros(len(JOINTS), bool)
-        self.offsets = np.zeros((len(JOINTS), 3))          # and with left and right bones of one length
 
     def add(self, skeleton: tuple) -> None:
         """One frame (positions, frames, status of the whole skeleton)."""
@@ -141,10 +157,12 @@ class LiveBones:
         column = self.local[:self.kept, k]
         ok = np.isfinite(column[:, 0])
         if ok.sum() >= self.s.min_frames:
-            self.raw[j], self.known[j] = np.median(column[ok], axis=0), True
+            self.raw[j], self.raw_known[j] = np.median(column[ok], axis=0), True
         if self.turn:
             return False
-        self.offsets = symmetric(self.raw, self.known) if self.s.symmetric else self.raw.copy()
+        self.offsets = symmetric(self.raw, self.raw_known) if self.s.symmetric else self.raw.copy()
+        self.known = self.raw_known.copy()
+        default_head(self.offsets, self.known)
         return True
 
 

@@ -188,3 +188,23 @@ def test_a_stripped_marker_set_keeps_every_joint_and_every_bone(take, variant):
     lengths = np.linalg.norm(pos[:, 1:] - pos[:, PARENT_INDEX[1:]], axis=-1)[:, ever[1:]]
     typical = np.median(lengths, axis=0)
     assert np.abs(lengths - typical).max() < 1e-6
+
+
+def test_one_marker_a_wrist_and_no_head_markers_still_give_every_bone_turned():
+    """A set with one marker at each wrist and none on the head (many running sets): the wrists stand at their marker,
+    the forearms roll with the elbows' axes, the head follows the neck (the thesis's default skeleton, scaled); every
+    joint in every frame with a finite bone frame."""
+    rec = read_recording(data_file("12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"))
+    rec = rec.slice(0, int(5 * rec.rate_hz))
+    shipped = load_profile("vicon53")
+    landmarks = {k: v for k, v in shipped.landmarks.items() if not (k.endswith("_USP") or "HEAD" in k or k == "SGL")}
+    prof = type(shipped).model_validate({**shipped.model_dump(), "landmarks": landmarks})
+    assert prof.landmarks["L_USP"] == prof.landmarks["L_RSP"]  # the styloid the set lacks stands at the other
+    chunks = list(SkeletonPipeline(prof, rec.labels, rate_hz=rec.rate_hz).run(rec.positions))
+    pos, frames = np.concatenate([c.positions for c in chunks]), np.concatenate([c.frames for c in chunks])
+    status = np.concatenate([c.status for c in chunks])
+    assert (status != Status.MISSING).all(), [JOINTS[j] for j in range(N_JOINTS) if (status[:, j] == 0).any()]
+    assert np.isfinite(pos).all() and np.isfinite(frames).all()
+    head = np.linalg.norm(pos[:, INDEX["head"]] - pos[:, INDEX["neck"]], axis=-1)
+    assert 0.1 < head.min() and head.max() < 0.2
+    assert (status[:, INDEX["wrist_l"]] == Status.LOCATED).mean() > 0.9

@@ -276,7 +276,8 @@ def test_frames_without_3d_data_are_an_error_and_a_reconnect_a_second(tmp_path):
             stalls = beat.errors.get("qtm_stall", 0)
             time.sleep(3.0)
             beat = g.heartbeats()["qtm"]
-            assert 1 <= beat.errors.get("qtm_stall", 0) - stalls <= 5, beat
+            # once a second (a storm made about a hundred a second); heartbeats a second old at either end
+            assert 1 <= beat.errors.get("qtm_stall", 0) - stalls <= 8, beat
             assert g.proc.poll() is None
 
 
