@@ -111,7 +111,7 @@ def _solve(args, rec) -> dict:
     if not (args.thesis or args.no_ik):  # (the rigid chains put a head no marker locates on the neck)
         missing = {j: fixes for j, fixes in missing.items() if j not in FOLLOW_THE_NECK}
     never = describe_missing(missing)
-    if never and not args.allow_missing:
+    if never and not args.allow_missing and not profile.drafted:  # (a draft's log has said what it lacks)
         raise SystemExit(f"mocap solve: profile {profile.name} cannot locate these joints in any frame:\n  "
                          + "\n  ".join(never) + "\nAdd the landmarks to the profile, or give --allow-missing to "
                          "solve without them.")

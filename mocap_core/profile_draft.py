@@ -10,6 +10,7 @@ Every line of the draft says which label it guessed from and why, for the user t
 """
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import dataclass
 
@@ -132,9 +133,9 @@ def draft_yaml(name: str, labels: list[str], up_axis: str, source: str) -> str:
     got, why, missing = draft(labels)
     used = {m for expr in got.values() for m in re.findall(r"[^\s(),]+", expr) if m != "mean"}
     lines = [f"# Drafted by `mocap profile init` from {source}: check every line against your marker placement.",
-             f"name: {name}", f"description: drafted from {source}",
+             f"name: {json.dumps(name)}", f"description: {json.dumps(f'drafted from {source}')}",
              f"up_axis: {up_axis}              # the vertical axis of files that do not say it",
-             "strip_prefixes: true", "landmarks:"]
+             "strip_prefixes: true", "landmarks:" if got else "landmarks: {}   # none guessed: fill them in"]
     for landmark, expr in got.items():
         lines.append(f"  {landmark + ':':8s}{expr:28s} # {site(landmark)}; guessed from {why[landmark]}")
     if missing:

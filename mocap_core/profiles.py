@@ -72,6 +72,7 @@ class Profile(BaseModel):
     body: BodyMeasurements = BodyMeasurements()
     source_file: str = ""
     lines: dict[str, int] = {}  # landmark -> line in the YAML file, for error messages
+    drafted: bool = False       # guessed from a recording's labels, not written (profile_for)
 
     @field_validator("up_axis")
     @classmethod
@@ -259,13 +260,40 @@ def profile_for(name_or_path: str | None, labels: list[str], log=None) -> Profil
         return load_profile(name_or_path)
     one_actor(labels)
     profile = detect_profile(labels)
-    if profile is not None and log is not None:
-        log.info("profile auto: %s fits the labels (another: --profile NAME or a YAML path)", profile.name)
+    if profile is not None:
+        if log is not None:
+            log.info("profile auto: %s fits the labels (another: --profile NAME or a YAML path)", profile.name)
+        return profile
+    profile = drafted_profile(labels)
     if profile is None:
         shown = ", ".join(labels[:30]) + (" ..." if len(labels) > 30 else "")
-        known = ", ".join(shipped())
-        raise ProfileError(f"no shipped profile fits these labels ({shown}); shipped: {known}. Write one for "
-                           f"your marker set (README, 'Your own marker set') and name it in the profile param")
+        raise ProfileError(f"no shipped profile fits these labels ({shown}; shipped: {', '.join(shipped())}) and no "
+                           f"landmark could be guessed from them: draft one with `mocap profile init TAKE -o "
+                           f"myset.yaml`, fill it in (README, 'Your own marker set') and give --profile myset.yaml")
+    if log is not None:
+        from mocap_core.landmark_needs import describe_missing, unlocatable
+
+        log.warning("no shipped profile fits these labels: solving with one drafted from them, %d landmarks (%s); "
+                    "`mocap profile init TAKE -o myset.yaml` writes it down to check and edit, then --profile "
+                    "myset.yaml", len(profile.landmarks), ", ".join(profile.landmarks))
+        for line in describe_missing(unlocatable(frozenset(profile.landmarks))):
+            log.warning("the draft cannot locate %s", line)
+    return profile
+
+
+def drafted_profile(labels: list[str]) -> Profile | None:
+    """A profile drafted from the labels by the common naming conventions (mocap_core.profile_draft), if any landmark
+    is found and it resolves against them."""
+    from mocap_core.profile_draft import draft
+
+    landmarks = draft([strip_prefix(x) for x in labels])[0]
+    if not landmarks:
+        return None
+    profile = Profile(name="draft", description="drafted from the labels", landmarks=landmarks, drafted=True)
+    try:
+        profile.resolve(labels)
+    except ProfileError:
+        return None
     return profile
 
 

@@ -125,6 +125,15 @@ def test_profile_init_drafts_a_profile_that_locates_what_the_shipped_one_does(tm
     assert mocap("profile", "init", str(data_file(take)), "-o", str(out)).returncode == 1   # never overwrites
 
 
+def test_a_draft_named_like_a_number_loads(tmp_path):
+    from mocap_core.profiles import load_profile
+
+    out = tmp_path / "01.yaml"  # (its stem was written unquoted, read back as the number 1)
+    r = mocap("profile", "init", str(data_file(KARATE)), "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert load_profile(out).name == "01"
+
+
 def test_the_landmarks_page_is_what_profile_explain_makes():
     from mocap_cli.profile_cmd import landmarks_page
 

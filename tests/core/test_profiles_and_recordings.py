@@ -118,3 +118,27 @@ def test_tracking_markers_are_resolved_apart_from_the_landmarks(tmp_path):
     p.write_text("name: mine\nlandmarks:\n  SACR: SACR\ntracking:\n  L_hip: [THI]\n")
     with pytest.raises(ProfileError, match="unknown tracking segment 'L_hip'.*L_thigh"):
         load_profile(p)
+
+
+def test_a_marker_set_no_shipped_profile_fits_is_solved_with_a_draft(caplog):
+    """The karate take without its finger markers fits no shipped profile (cmu41 names them): the labels are drafted
+    into a profile in memory, the log says which landmarks it found, what it cannot locate and the command that
+    writes it down; the solve locates every joint but the hands."""
+    from mocap_core.pipeline import SkeletonPipeline
+    from mocap_core.profiles import detect_profile, profile_for
+    from mocap_core.skeleton import INDEX, Status
+
+    rec = read_recording(data_file("08_cmu_135_02_karate_kata.c3d")).slice(0, 240)
+    keep = [k for k, x in enumerate(rec.labels) if not x.endswith("FIN")]
+    labels = [rec.labels[k] for k in keep]
+    assert detect_profile(labels) is None
+    with caplog.at_level("WARNING", logger="test.profile"):
+        import logging
+        profile = profile_for("auto", labels, logging.getLogger("test.profile"))
+    assert profile.drafted and "L_HM2" not in profile.landmarks and profile.landmarks["L_FLE"] == "LKNE"
+    assert "mocap profile init" in caplog.text and "hand_l" in caplog.text
+    chunks = SkeletonPipeline(profile, labels, rate_hz=rec.rate_hz).run(rec.positions[:, keep])
+    status = np.concatenate([c.status for c in chunks])
+    hands = [INDEX["hand_l"], INDEX["hand_r"]]
+    others = [j for j in range(status.shape[1]) if j not in hands]
+    assert (status[:, others] != Status.MISSING).mean() > 0.99
