@@ -7,6 +7,7 @@ from pathlib import Path
 from mocap_core.landmark_needs import describe_missing, needed_by, site, unlocatable
 from mocap_core.profile_draft import draft_yaml
 from mocap_core.profiles import DEFAULT_UP, LANDMARKS, load_profile, shipped
+from mocap_core.up_axis import recording_up_axis
 from nodes.bags import read_take
 
 
@@ -66,7 +67,8 @@ def cmd_init(args) -> int:
     out = Path(args.output)
     if out.exists():
         raise SystemExit(f"mocap profile init: {out} exists; give another -o (a draft never overwrites)")
-    text = draft_yaml(args.name or out.stem, rec.labels, rec.meta.get("up_axis", DEFAULT_UP), Path(rec.source).name)
+    up = recording_up_axis(rec) or DEFAULT_UP
+    text = draft_yaml(args.name or out.stem, rec.labels, up, Path(rec.source).name)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     profile = load_profile(out)  # the draft is a valid profile, and resolves against its recording

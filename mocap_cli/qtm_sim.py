@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mocap_core import qtm_protocol as qp
-from mocap_core.profiles import detect_profile
 from mocap_core.recordings import Recording
+from mocap_core.up_axis import recording_up_axis
 from mocap_core.world import DEFAULT_UP, normalize_up
 from nodes.bags import read_take
 
@@ -310,7 +310,8 @@ def run(args) -> int:
         hide.append((label, first, last))
     rec = read_take(args.file)
     faults = Faults(args.drop_after, args.stall_at, args.stall_s, args.no_3d_from, hide)
-    emulator = QtmEmulator(rec, args.rate, args.loop, args.up_axis or recording_up_axis(rec), faults)
+    up = args.up_axis or recording_up_axis(rec, log) or DEFAULT_UP
+    emulator = QtmEmulator(rec, args.rate, args.loop, up, faults)
     asyncio.run(serve(emulator, args.host, args.port, args.ready_file))
     return 0
 
@@ -320,14 +321,6 @@ def _up_axis(text: str) -> str:
         return normalize_up(text)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def recording_up_axis(rec: Recording) -> str:
-    """The recording's up axis: the file's word, else the shipped profile its labels fit, else QTM's default."""
-    if rec.meta.get("up_axis"):
-        return rec.meta["up_axis"]
-    profile = detect_profile(rec.labels)
-    return profile.up_axis if profile else DEFAULT_UP
 
 
 def start_emulator(take: str, *args: str, cwd: str | None = None):

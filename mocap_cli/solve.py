@@ -15,8 +15,9 @@ from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.landmark_needs import FOLLOW_THE_NECK, describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
-from mocap_core.warmup import FIT_PARTS, ensure_compiled, pipeline_parts
 from mocap_core.skeleton import Status
+from mocap_core.up_axis import take_up_axis
+from mocap_core.warmup import FIT_PARTS, ensure_compiled, pipeline_parts
 from nodes.bags import read_take
 
 log = logging.getLogger("mocap.solve")
@@ -149,7 +150,7 @@ def _write(args, rec, profile, chunks) -> int:
     counts = {s: 0 for s in Status}
     t0 = time.perf_counter()
     out = JointsCsvWriter(args.joints_out) if args.joints_out else None
-    up = rec.meta.get("up_axis") or profile.up_axis
+    up = take_up_axis(rec, profile, log)
     bvh = BvhWriter(args.bvh_out, rec.rate_hz, up, names=args.bvh_names) if args.bvh_out else None
     with tqdm(total=rec.n_frames, unit="frame", disable=args.quiet,
               desc=f"solving {rec.source.split('/')[-1]}") as bar:

@@ -12,6 +12,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from messages import FLAG_MEASURED, FLAG_MISSING, MarkerFrame, MarkerSet, Message
+from mocap_core.up_axis import recording_up_axis
 from mocap_core.world import normalize_up
 from nodes.actor_split import ActorSplit, actor_topics
 from nodes.bags import read_take
@@ -76,7 +77,7 @@ class FileSource(Node):
         self.index = self.first
         self.sent = 0
         self.next_set = 0.0
-        self.up_axis = p.up_axis or self.rec.meta.get("up_axis", "")
+        self.up_axis = p.up_axis or recording_up_axis(self.rec, self.log) or ""
         self.lockstep = Lockstep(self.ctx, p.lockstep_topic, p.lockstep_timeout_s)
         self.split = ActorSplit(self.ctx, p.actors, self.log)
         self.log.info("replaying %s: %d markers, %d frames at %.0f Hz", self.rec.source, len(self.rec.labels),
