@@ -6,6 +6,7 @@ import logging
 import time
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from mocap_core.bvh import NAMINGS, BvhWriter
@@ -15,7 +16,7 @@ from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
 from mocap_core.landmark_needs import FOLLOW_THE_NECK, describe_missing, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
-from mocap_core.skeleton import Status
+from mocap_core.skeleton import JOINTS, Status
 from mocap_core.up_axis import take_up_axis
 from mocap_core.warmup import FIT_PARTS, ensure_compiled, pipeline_parts
 from nodes.bags import read_take
@@ -106,6 +107,7 @@ def _for_actor(args, actor: str):
 
 
 def _solve(args, rec) -> dict:
+    started = time.perf_counter()
     profile = profile_for(args.profile, rec.labels, log)
     profile.resolve(rec.labels)  # a label the profile names and the take lacks, or several actors: said first
     missing = unlocatable(frozenset(profile.landmarks))
@@ -121,12 +123,12 @@ def _solve(args, rec) -> dict:
     if args.fit or args.subject:
         if args.thesis or args.no_ik:
             raise SystemExit("mocap solve: --fit/--subject is a method of its own; drop --thesis/--no-ik")
-        return _write(args, rec, profile, _fitted(args, rec, profile))
+        return _write(args, rec, profile, _fitted(args, rec, profile), started)
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)
     pipe = SkeletonPipeline(profile, rec.labels, args.solver, params, load_constraints(args.constraints),
                             fill_gaps=not args.no_ik, options="thesis" if args.thesis else "studio", rate_hz=rec.rate_hz)
-    return _write(args, rec, profile, pipe.run(rec.positions))
+    return _write(args, rec, profile, pipe.run(rec.positions), started)
 
 
 def _fitted(args, rec, profile):
@@ -145,10 +147,11 @@ def _fitted(args, rec, profile):
     return [chunk]
 
 
-def _write(args, rec, profile, chunks) -> int:
+def _write(args, rec, profile, chunks, started: float) -> int:
+    """The solve's frames to the outputs as they come; ``started``: when the solve began (for the timing line)."""
     times = rec.times()
     counts = {s: 0 for s in Status}
-    t0 = time.perf_counter()
+    missing = np.zeros(len(JOINTS), np.int64)
     out = JointsCsvWriter(args.joints_out) if args.joints_out else None
     up = take_up_axis(rec, profile, log)
     bvh = BvhWriter(args.bvh_out, rec.rate_hz, up, names=args.bvh_names) if args.bvh_out else None
@@ -163,12 +166,16 @@ def _write(args, rec, profile, chunks) -> int:
                     bvh.add(chunk.positions[k], chunk.frames[k])
             for s in Status:
                 counts[s] += int((chunk.status == s).sum())
+            missing += (chunk.status == Status.MISSING).sum(axis=0)
             bar.update(len(chunk.positions))
     if out:
         out.close()
     if bvh:
         bvh.close()
-    took = time.perf_counter() - t0
+    took = time.perf_counter() - started
+    for j in np.flatnonzero((missing > 0.1 * rec.n_frames) & (missing < rec.n_frames)):
+        log.warning("%s is missing in %.0f %% of the frames: no landmark located it there and no fill could",
+                    JOINTS[j], 100 * missing[j] / rec.n_frames)
     total = sum(counts.values())
     log.info("%d frames in %.1f s (%.0f frames/s): %s -> %s", rec.n_frames, took, rec.n_frames / took,
              ", ".join(f"{s.name.lower()} {100 * c / total:.1f}%" for s, c in counts.items()),

@@ -39,3 +39,30 @@ def test_a_local_dask_cluster_writes_what_a_serial_run_writes(tmp_path):
     dask = solve(*takes, "--out-dir", str(tmp_path / "dask"), "--cluster", "local")
     assert serial.returncode == 0 and dask.returncode == 0, dask.stderr[-3000:]
     assert same_outputs(tmp_path / "serial", tmp_path / "dask")
+
+
+def test_a_solve_says_which_joints_it_left_missing_and_times_the_whole_solve(tmp_path, caplog):
+    """A joint missing in over 10 % of the frames is named with its share; the timing line counts the solve, not
+    only the writing (the fit's frames come all at once, before the writing)."""
+    import argparse
+    import time
+
+    import numpy as np
+
+    from mocap_cli.solve import _write
+    from mocap_core.pipeline import SolvedChunk
+    from mocap_core.profiles import load_profile
+    from mocap_core.recordings import read_recording
+    from mocap_core.skeleton import INDEX, N_JOINTS, Status
+    from tests.conftest import data_file
+
+    rec = read_recording(data_file("03_sprint_start_BTK_SprintMotion.trc")).slice(0, 100)
+    status = np.full((100, N_JOINTS), Status.LOCATED, np.uint8)
+    status[:30, INDEX["knee_l"]] = Status.MISSING   # 30 %: said
+    status[:5, INDEX["knee_r"]] = Status.MISSING    # 5 %: not
+    chunk = SolvedChunk(0, np.zeros((100, N_JOINTS, 3)), np.tile(np.eye(3), (100, N_JOINTS, 1, 1)), status)
+    args = argparse.Namespace(joints_out=str(tmp_path / "out.csv"), bvh_out=None, bvh_names=None, quiet=True)
+    with caplog.at_level("INFO", logger="mocap.solve"):
+        got = _write(args, rec, load_profile("btk_sprint"), [chunk], time.perf_counter() - 2.0)
+    assert "knee_l is missing in 30 % of the frames" in caplog.text and "knee_r is missing" not in caplog.text
+    assert got["seconds"] >= 2.0
