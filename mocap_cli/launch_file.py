@@ -54,9 +54,10 @@ class NodeEntry(BaseModel):
     remaps: dict[str, str] = {}
     replicas: int = Field(1, ge=1, le=64)
     respawn: bool = True
-    hwm: int = Field(1000, ge=1, description="messages queued per peer before the newest are dropped")
+    hwm: int = Field(1000, ge=1, le=10_000_000, description="messages queued per peer before the newest are dropped")
     keep_last: bool = Field(False, description="process only the newest queued frame; count the rest as drops")
-    endpoint: str | None = Field(None, description="explicit endpoint to bind (multi-host graphs)")
+    endpoint: str | None = Field(None, pattern=r"^(tcp|ipc|inproc)://\S+$",
+                                 description="explicit endpoint to bind (multi-host graphs): tcp://HOST:PORT")
     container: str | None = Field(None, pattern=r"^[A-Za-z0-9_\-]+$",
                                   description="run in one OS process with the other nodes of this name, wired "
                                   "over inproc sockets (ROS 2's component containers): far less CPU a frame")
@@ -69,7 +70,8 @@ class NodeEntry(BaseModel):
 
 class LaunchFile(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    name: str = "graph"
+    name: str = Field("graph", pattern=r"^[A-Za-z0-9_\-.]+$", max_length=64,
+                      description="names the graph's registry file and sockets: letters, digits, _ - .")
     namespace: str = ""
     transport: Transport = Transport()
     actors: dict[str, dict[str, Any]] = Field(default_factory=dict, description="the subjects in the stream (their "
@@ -176,7 +178,18 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     if not eq or not dot or not node or not param:
         raise LaunchError(f"--set {text!r}: expected NODE.PARAM=VALUE, e.g. --set solver.solver=fabrik, or "
                           "actors=[alice, bob]")
-    return node, param, yaml.safe_load(value) if value else ""
+    return node, param, _yaml_value(text, value) if value else ""
+
+
+def _yaml_value(text: str, value: str) -> Any:
+    """A --set value as YAML, or a LaunchError saying what is wrong with it."""
+    try:
+        if _expanded_size(yaml.compose(value), MAX_YAML_NODES) > MAX_YAML_NODES:
+            raise LaunchError(f"--set {text!r}: the value expands to over {MAX_YAML_NODES} YAML nodes")
+        return yaml.safe_load(value)
+    except yaml.YAMLError as e:
+        raise LaunchError(f"--set {text!r}: the value is not YAML ({' '.join(str(e).split())}); quote a text "
+                          f"value: --set '{text.partition('=')[0]}=\"...\"'") from None
 
 
 # The most YAML nodes a launch file may expand to (its aliases followed): a real graph has a few hundred; a "billion
@@ -220,15 +233,19 @@ def load_launch_file(path: str | Path, overrides: list[str] = ()) -> LaunchFile:
         raw = yaml.safe_load(text)
     except FileNotFoundError:
         raise LaunchError(f"launch file {path} not found") from None
+    except UnicodeDecodeError as e:
+        raise LaunchError(f"launch file {path}: not UTF-8 text (byte {e.start})") from None
+    except RecursionError:
+        raise LaunchError(f"launch file {path}: nested too deep to be a launch file") from None
     except yaml.YAMLError as e:
         raise LaunchError(f"launch file {path}: not valid YAML ({e})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("nodes"), list):
         raise LaunchError(f"launch file {path}: expected a mapping with a 'nodes' list")
     raw.setdefault("name", path.stem)
-    by_id = {n.get("id"): n for n in raw["nodes"] if isinstance(n, dict)}
+    by_id = {n["id"]: n for n in raw["nodes"] if isinstance(n, dict) and isinstance(n.get("id"), str)}
     for text in overrides:
         if text.partition("=")[0].strip() == "actors":  # the graph's own list: --set 'actors=[alice, bob]'
-            raw["actors"] = yaml.safe_load(text.partition("=")[2])
+            raw["actors"] = _yaml_value(text, text.partition("=")[2])
             continue
         node, param, value = parse_override(text)
         if node not in by_id:

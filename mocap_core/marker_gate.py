@@ -17,11 +17,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mocap_core.world import MAX_COORDINATE_M
+
 
 @dataclass
 class MarkerGate:
     max_speed_m_s: float = 50.0
-    max_distance_m: float = 1000.0
+    max_distance_m: float = MAX_COORDINATE_M
     max_body_m: float = 3.0
     last: np.ndarray | None = None          # (M, 3) where each marker was last accepted
     last_t: np.ndarray | None = None        # (M,) and when

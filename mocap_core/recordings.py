@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mocap_core.world import MAX_COORDINATE_M
+
 UNIT_SCALE = {"mm": 0.001, "cm": 0.01, "m": 1.0, "dm": 0.1, "in": 0.0254}
 
 
@@ -48,9 +50,6 @@ class Recording:
                          f"{self.source} ({name})", self.first_frame, self.meta)
 
 
-FLOAT32_MAX = float(np.finfo(np.float32).max)
-
-
 def _finish(labels, xyz_units: np.ndarray, units: str, rate: float, source: str, first_frame=0, meta=None):
     scale = UNIT_SCALE.get(units.strip().lower())
     if scale is None:
@@ -59,7 +58,7 @@ def _finish(labels, xyz_units: np.ndarray, units: str, rate: float, source: str,
     if pos.ndim != 3 or pos.shape[0] == 0:
         raise RecordingError(f"{source}: no frames")
     pos[np.all(pos == 0.0, axis=2)] = np.nan
-    pos[~(np.abs(pos) < FLOAT32_MAX).all(axis=2)] = np.nan  # infinite, or past float32: no position, occluded
+    pos[~(np.abs(pos) <= MAX_COORDINATE_M).all(axis=2)] = np.nan  # infinite, or past any capture volume: occluded
     if not rate or not np.isfinite(rate) or rate <= 0:
         raise RecordingError(f"{source}: bad capture rate {rate!r}")
     if len(set(labels)) != len(labels):
@@ -262,7 +261,7 @@ def read_mat(path: Path, take: str | None = None) -> Recording:
             raise ValueError(f"nFrames is {frames}")
         data = np.asarray(t.data, dtype=np.float64).reshape(frames, len(labels), 3)
         rate = float(t.freq)
-    except (AttributeError, TypeError, ValueError) as e:
+    except (AttributeError, TypeError, ValueError, OverflowError) as e:
         raise RecordingError(f"{path}: take {name!r} is malformed ({e}); a MoCap Toolbox take has nFrames, freq, "
                              "markerName and data (nFrames x 3 markers)") from None
     return _finish(labels, data, "mm", rate, f"{path}:{name}", meta={"take": name})

@@ -17,6 +17,7 @@ import numpy as np
 UpAxis = Literal["+x", "-x", "+y", "-y", "+z", "-z"]
 UP_AXES: tuple[str, ...] = get_args(UpAxis)
 DEFAULT_UP: str = "+z"  # QTM's default
+MAX_COORDINATE_M = 1000.0  # no capture volume reaches this far from its origin: a coordinate past it is a glitch
 
 
 def normalize_up(text: str) -> str:

@@ -23,6 +23,7 @@ from typing import Iterator
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
+from zstandard import ZstdError
 from mcap.writer import CompressionType, Writer
 
 from messages import BY_SCHEMA, MarkerFrame, decode
@@ -175,7 +176,7 @@ def _read_piece(path: Path, topics: list[str] | None) -> Iterator[BagMessage]:
                 count += 1
                 yield BagMessage(channel.topic, schema.name if schema else "unknown", message.data,
                                  message.log_time, message.publish_time)
-        except (McapError, EOFError, ValueError, OSError, struct.error) as e:
+        except (McapError, EOFError, ValueError, OSError, struct.error, ZstdError, RuntimeError, MemoryError) as e:
             # a recorder killed mid-write leaves a cut chunk and no footer: keep what came before
             log.warning("%s: damaged after %d messages (%s: %s); the rest is unreadable", path, count,
                         type(e).__name__, e)

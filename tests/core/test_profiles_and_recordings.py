@@ -78,10 +78,15 @@ def test_malformed_values_name_the_file_and_place(tmp_path):
     (tmp_path / "inf.trc").write_text("\n".join(lines) + "\n")
     rec = read_recording(tmp_path / "inf.trc")
     assert np.isfinite(rec.positions).all(axis=2).sum() == rec.positions[..., 0].size - 1
+    cells[5] = "2e6"  # 2 km (the file's mm): past any capture volume, taken as no position as infinity is
+    lines[9] = "\t".join(cells)
+    (tmp_path / "far.trc").write_text("\n".join(lines) + "\n")
+    rec = read_recording(tmp_path / "far.trc")
+    assert np.isfinite(rec.positions).all(axis=2).sum() == rec.positions[..., 0].size - 1
     mat = loadmat(str(data_file("13_qualisys_dance_walk_mocaptoolbox_mcdemodata.mat")), squeeze_me=True,
                   struct_as_record=False)
     take = mat["walk1"]
-    for frames in (-10, 0):
+    for frames in (-10, 0, float("inf")):
         fields = {name: getattr(take, name) for name in take._fieldnames}
         fields["nFrames"] = frames
         savemat(str(tmp_path / "bad.mat"), {"walk1": fields})

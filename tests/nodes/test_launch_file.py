@@ -50,6 +50,25 @@ def test_bad_files(tmp_path):
         load_launch_file(f, ["b.x=1"])
 
 
+def test_what_a_red_team_sent_is_a_clear_error_not_a_traceback(tmp_path):
+    studio = REPO / "launch" / "studio.yaml"
+    for setting, said in (("viewer.up_axis=@x", "not YAML .*quote a text value"),
+                          ("viewer.port=&a [*a, *a, *a]", "expands to over"),
+                          ("viewer.hwm=1e20", "hwm"), ("viewer.hwm=100000000000", "less than or equal"),
+                          ("viewer.endpoint=builtins:print", "endpoint")):
+        with pytest.raises(LaunchError, match=said):
+            load_launch_file(studio, [setting])
+    files = {"latin1.yaml": (b"name: x\nnodes: \xff\xfe\n", "not UTF-8"),
+             "deep.yaml": (b"nodes: " + b"[" * 20000 + b"]" * 20000, "nested too deep"),
+             "slash.yaml": (b"name: a/b\nnodes: [{id: s, kind: relay}]\n", "name"),
+             "long.yaml": (b"name: " + b"a" * 300 + b"\nnodes: [{id: s, kind: relay}]\n", "name"),
+             "listid.yaml": (b"nodes: [{id: [s], kind: relay}]\n", "nodes.0.id")}
+    for name, (text, said) in files.items():
+        (tmp_path / name).write_bytes(text)
+        with pytest.raises(LaunchError, match=said):
+            load_launch_file(tmp_path / name)
+
+
 def test_overrides_get_the_files_checks_and_an_alias_bomb_is_refused(tmp_path):
     """`--set torso.kind=null` was a TypeError traceback, `replicas=1000` planned 1,010 processes, `replicas=0`
     dropped the node silently, and a 600-byte YAML alias bomb took 34 s and 4 GB before its error."""
