@@ -20,6 +20,9 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
     host: str = "127.0.0.1"
     port: int = Field(8765, ge=0, le=65535)
+    legacy_port: int | None = Field(-1, ge=-1, le=65535, description="a port for clients that speak only "
+                                    "foxglove.websocket.v1 (Lichtblick, older Foxglove): -1 the next after port (any "
+                                    "free one if port is 0), null none")
     max_rate_hz: float = Field(60.0, gt=0)
     actors: list[str] = Field(default_factory=list, description="show each of these actors' skeleton "
                               "(mocap/<actor>/skeleton/solved); the launch file's actors: sets it")
@@ -43,6 +46,16 @@ class FoxgloveOutput(Node):
         self.channels = Channels(self.context)
         self.next: dict[str, float] = {}  # per topic: when the next frame may go out
         self.log.info("Foxglove WebSocket at ws://%s:%d", self.params.host, self.server.port)
+        self.legacy = None
+        p = self.params
+        if p.legacy_port is not None:
+            from nodes.foxglove_legacy import LegacyRelay
+
+            port = p.legacy_port if p.legacy_port >= 0 else (p.port + 1 if p.port else 0)
+            upstream = "127.0.0.1" if p.host in ("0.0.0.0", "", "::") else p.host
+            self.legacy = LegacyRelay(p.host, port, f"ws://{upstream}:{self.server.port}", self.log)
+            self.legacy.start()
+            self.log.info("and for foxglove.websocket.v1 clients (Lichtblick) at ws://%s:%d", p.host, self.legacy.port)
 
     def on_message(self, topic, msg) -> None:
         now = time.monotonic()
@@ -53,4 +66,6 @@ class FoxgloveOutput(Node):
         self.channels.log(msg, msg.header.entry_time_ns or time.time_ns(), actor)
 
     def teardown(self) -> None:
+        if self.legacy is not None:
+            self.legacy.stop()
         self.server.stop()

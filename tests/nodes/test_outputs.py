@@ -218,21 +218,24 @@ def _protobuf_class(schema_b64: str, name: str):
 
 
 @pytest.mark.timeout(180)
-def test_foxglove_websocket_streams_an_upright_skeleton(tmp_path):
+@pytest.mark.parametrize("protocol", ["foxglove.sdk.v1", "foxglove.websocket.v1"])
+def test_foxglove_websocket_streams_an_upright_skeleton(tmp_path, protocol):
     """A Foxglove WebSocket client (its WebSocket protocol over the websockets package) subscribes to /skeleton and
-    decodes a SceneUpdate with the schema the server advertises: joints drawn, head above the pelvis in Z."""
+    decodes a SceneUpdate with the schema the server advertises: joints drawn, head above the pelvis in Z. A client
+    that offers only the protocol's older name (Lichtblick) is served on the legacy port (the SDK's refuses it)."""
     import json
     import struct
 
     from websockets.sync.client import connect
 
-    port = free_port()
-    extra = f"  - {{id: foxglove, kind: foxglove_output, params: {{port: {port}}}}}"
+    port, legacy = free_port(), free_port()
+    extra = f"  - {{id: foxglove, kind: foxglove_output, params: {{port: {port}, legacy_port: {legacy}}}}}"
     graph = pipeline_graph(f"{{path: {data_file(TAKE)}, loop: true}}", extra=extra)
     with launched(tmp_path, graph) as g:
         def connected():
             try:
-                return connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"], open_timeout=2)
+                return connect(f"ws://127.0.0.1:{legacy if protocol.endswith('websocket.v1') else port}",
+                               subprotocols=[protocol], open_timeout=2)
             except OSError:
                 return None
 
