@@ -60,6 +60,10 @@ def compose(launch_path: str, host: str | None = None) -> str:
             spec.params = {**spec.params, "host": "0.0.0.0"}
             svc["command"][-1] = json.dumps(spec.model_dump(exclude_defaults=True), separators=(",", ":"))
             svc["ports"] = [f"127.0.0.1:{port}:{port}"]
+            legacy = spec.params.get("legacy_port", -1) if spec.kind == "foxglove_output" else None
+            if legacy is not None:  # (Foxglove's older protocol name, on the port after its own by default)
+                legacy = port + 1 if legacy == -1 else legacy
+                svc["ports"].append(f"127.0.0.1:{legacy}:{legacy}")
         if spec.kind == "vmc_output":
             svc["extra_hosts"] = ["host.docker.internal:host-gateway"]
         if any(q.host != host and set(q.subscribes) & set(p.publishes) - {"diagnostics"} for q in procs):
