@@ -4,13 +4,14 @@ from __future__ import annotations
 import csv
 import logging
 import os
+from functools import lru_cache
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from tqdm import tqdm
 
 from mocap_cli.rigid_eval import add_take_args, load_take, take_names
-from mocap_core.leave_one_out import KEEP_MM, LEFT_OUT, STUDIO, score
+from mocap_core.leave_one_out import KEEP_MM, LEFT_OUT, STUDIO, reference, score
 
 
 def register(esub) -> None:
@@ -28,7 +29,13 @@ def register(esub) -> None:
 
 def _take(name: str, seconds: float, option: str) -> tuple[str, str, dict[str, float]]:
     rec, profile = load_take(name, seconds)
-    return name, option, score(rec, profile, [option])[option]
+    return name, option, score(rec, profile, [option], _reference(name, seconds))[option]
+
+
+@lru_cache(maxsize=None)
+def _reference(name: str, seconds: float):
+    """A take's complete studio solve, once per worker process (each solves the take for several options)."""
+    return reference(*load_take(name, seconds))
 
 
 def run(args) -> int:

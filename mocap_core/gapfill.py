@@ -293,10 +293,11 @@ class GapFiller:
         (the limb nodes run side by side: none sees another's filled joints)."""
         torso, *limbs = self.limbs.values()
         stats = {"torso": torso.fill(positions, frames, status, time_s)}
-        given = positions.copy(), frames.copy(), status.copy()
+        filled = []
         for f in limbs:
-            p, r, s = (a.copy() for a in given)
+            p, r, s = positions.copy(), frames.copy(), status.copy()
             stats[f.limb] = f.fill(p, r, s, time_s)
-            idx = f.joints
+            filled.append((f.joints, p, r, s))
+        for idx, p, r, s in filled:
             positions[idx], frames[idx], status[idx] = p[idx], r[idx], s[idx]
         return stats

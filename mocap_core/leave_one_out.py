@@ -91,9 +91,16 @@ def cases(profile: Profile, rec: Recording) -> list[Case]:
     return out
 
 
-def score(rec: Recording, profile: Profile, options: list[str]) -> dict[str, dict[str, float]]:
-    """{option: {case: mean mm of the hidden joints}} on one take (``studio``: every option on)."""
-    reference = solve(STUDIO, rec.positions.astype(np.float64), rec, profile)[0]
+def reference(rec: Recording, profile: Profile) -> np.ndarray:
+    """The studio options' solve of the complete take (F, J, 3): what the hidden joints are measured against."""
+    return solve(STUDIO, rec.positions.astype(np.float64), rec, profile)[0]
+
+
+def score(rec: Recording, profile: Profile, options: list[str],
+          complete: np.ndarray | None = None) -> dict[str, dict[str, float]]:
+    """{option: {case: mean mm of the hidden joints}} on one take (``studio``: every option on); ``complete``: the
+    take's ``reference``, if already solved."""
+    complete = reference(rec, profile) if complete is None else complete
     col = list(profile.columns(rec.labels))
     out = {}
     for option in options:
@@ -104,7 +111,7 @@ def score(rec: Recording, profile: Profile, options: list[str]) -> dict[str, dic
             pipe = SkeletonPipeline(profile, rec.labels, rate_hz=rec.rate_hz, options=without(option))
             pos = np.concatenate([c.positions for c in pipe.run(markers)])
             j = [INDEX[x] for x in case.measured]
-            err = np.linalg.norm(pos[case.frames][:, j] - reference[case.frames][:, j], axis=-1) * 1000
-            seen = np.isfinite(reference[case.frames][:, j]).all(axis=-1)
+            err = np.linalg.norm(pos[case.frames][:, j] - complete[case.frames][:, j], axis=-1) * 1000
+            seen = np.isfinite(complete[case.frames][:, j]).all(axis=-1)
             out[option][case.name] = float(np.nanmean(err[seen]))
     return out

@@ -5,7 +5,7 @@ was last accepted, is taken as missing in that frame (a glitch of the cameras, a
 marker in the shared recordings moves at 17 m/s (a strike), so the default of 50 m/s keeps every real
 motion. A frame stamped at or before the last (a duplicated or replayed time) counts as one frame interval later.
 A marker with no place accepted yet (the first frame, its first appearance) is accepted within ``max_body_m`` of
-the frame's median marker (a body's markers lie within 1.4 m of it in the shared recordings). A marker whose new
+the frame's median marker (a body with its arms stretched overhead spans little over 2 m). A marker whose new
 track goes on consistently is accepted again on the next frame: it is checked against where it was last rejected
 too, so a prop away from the body, or a marker that really moved, is kept from its second frame.
 Every stage that learns from the markers sits behind this gate (the hip stage, the fit), so one glitched frame
@@ -52,7 +52,7 @@ class MarkerGate:
         with np.errstate(invalid="ignore", over="ignore"):
             bad = seen & ~(np.abs(x) <= self.max_distance_m).all(axis=1)
             near = seen & ~bad
-            if near.sum() >= 3:
+            if (near & ~np.isfinite(self.last_t)).any() and near.sum() >= 3:  # (only a new marker needs the body)
                 near &= np.linalg.norm(x - np.median(x[near], axis=0), axis=1) <= self.max_body_m
             fast = seen & ~bad & ~self._reachable(x, self.last, self.last_t, time_s, near)
             fast &= ~self._reachable(x, self.rejected, self.rejected_t, time_s, False)  # not a track going on

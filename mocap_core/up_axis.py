@@ -2,9 +2,9 @@
 
 A file may say its up axis (mocap_core.world); a profile's ``up_axis`` is a guess for files that do not, and a wrong
 guess lays the BVH and the live avatar on their backs. So the frames are asked too. Up is the axis along which the
-feet keep to one level, the floor: each frame's lowest foot landmark along it moves least over the take (a walk, a
-dance, a sprint's start in the blocks move the feet far more across the floor than off it). Its sign is where the
-head and shoulders stand off the feet (a body leaning, even crouched, still has its head above its feet).
+feet keep to one level, the floor: each frame's lowest foot landmark along it moves least over the take (walking,
+dancing, a crouched start move the feet far more across the floor than off it). Its sign is where the head and
+shoulders stand off the feet (a body leaning, even crouched, still has its head above its feet).
 """
 from __future__ import annotations
 
@@ -46,8 +46,7 @@ def _iqr(x: np.ndarray) -> float:
 def take_up_axis(rec: Recording, profile: Profile, log=None) -> str:
     """The take's up axis: the file's word, else what its frames show, else the profile's; a stated axis (the
     file's or the profile's) that the frames contradict is said in ``log``."""
-    step = max(1, rec.n_frames // MOST_FRAMES)
-    found = up_from_landmarks(profile.resolve(rec.labels).apply(rec.positions[::step]))
+    found = _found(rec, profile)
     stated = rec.meta.get("up_axis")
     if stated:
         if found and found != normalize_up(stated) and log is not None:
@@ -72,8 +71,13 @@ def recording_up_axis(rec: Recording, log=None) -> str | None:
         profile = profile_for(AUTO, rec.labels)
     except ProfileError:
         return None
-    step = max(1, rec.n_frames // MOST_FRAMES)
-    found = up_from_landmarks(profile.resolve(rec.labels).apply(rec.positions[::step]))
+    found = _found(rec, profile)
     if found and log is not None:
         log.info("%s does not say which axis is up; its frames show %s", rec.source, found)
     return found
+
+
+def _found(rec: Recording, profile: Profile) -> str | None:
+    """What the take's frames (at most MOST_FRAMES, spread over it) show."""
+    step = max(1, rec.n_frames // MOST_FRAMES)
+    return up_from_landmarks(profile.resolve(rec.labels).apply(rec.positions[::step]))

@@ -71,7 +71,6 @@ class QtmIngest(Node):
         self.stopping = threading.Event()
         self.started_ns: int | None = None
         self.stale, self.stale_logged = 0, False
-        self.last_frame_s, self.said_no_3d = time.monotonic(), False  # (of the session; the watchdog reads it)
         self.thread = threading.Thread(target=self._client_thread, name="qtm-rt", daemon=True)
         self.thread.start()
 
