@@ -31,19 +31,27 @@ from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
 
 
-def usage(graph: str) -> dict[str, tuple[float, float]]:
-    """Per process (a node, or a container of nodes): (RSS in MB, CPU seconds used so far)."""
+def usage(graph: str) -> dict[str, tuple[float, float, float]]:
+    """Per process (a node, a container of nodes, and the forkserver they were forked from): (RSS in MB, PSS in MB,
+    CPU seconds used so far). PSS splits each shared page among the processes that share it: its sum is what the
+    graph holds."""
     data = json.loads(registry_path(graph).read_text())
-    out = {}
+    procs = {}
     for n in data["nodes"]:
-        if n["process"] in out:
-            continue
         try:
-            p = psutil.Process(n["pid"])
-            cpu = p.cpu_times()
-            out[n["process"]] = (p.memory_info().rss / 2**20, cpu.user + cpu.system)
+            procs.setdefault(n["process"], psutil.Process(n["pid"]))
         except (psutil.Error, TypeError):
-            out[n["process"]] = (float("nan"), float("nan"))
+            procs[n["process"]] = None
+    parent = next((p.parent() for p in procs.values() if p is not None), None)
+    if parent is not None and parent.pid != data["launcher_pid"]:
+        procs["forkserver"] = parent
+    out = {}
+    for name, p in procs.items():
+        try:
+            cpu, memory = p.cpu_times(), p.memory_full_info()
+            out[name] = (memory.rss / 2**20, memory.pss / 2**20, cpu.user + cpu.system)
+        except (psutil.Error, AttributeError):
+            out[name] = (float("nan"), float("nan"), float("nan"))
     return out
 
 
@@ -84,14 +92,17 @@ def main():
     frames_per_s = int(((received >= t0) & (received < t1)).sum()) / (t1 - t0)
     print(f"between the samples: {frames_per_s:.0f} skeletons a second ({100 * frames_per_s / args.rate:.0f} % of "
           f"QTM's rate)")
-    print(f"{'process':<12} {'RSS start MB':>13} {'RSS end MB':>11} {'CPU %':>6} {'CPU us/frame':>13}  "
-          "(CPU of one core between the two samples; per frame that came through)")
+    print(f"{'process':<12} {'RSS start MB':>13} {'RSS end MB':>11} {'PSS end MB':>11} {'CPU %':>6} "
+          f"{'CPU us/frame':>13}  (CPU of one core between the two samples; per frame that came through)")
     total = 0.0
-    for node, (rss0, cpu0) in start.items():
-        rss1, cpu1 = end.get(node, (float("nan"), float("nan")))
+    for node, (rss0, _, cpu0) in start.items():
+        rss1, pss1, cpu1 = end.get(node, (float("nan"),) * 3)
         share = (cpu1 - cpu0) / (t1 - t0)
         total += share
-        print(f"{node:<12} {rss0:>13.1f} {rss1:>11.1f} {100 * share:>6.0f} {1e6 * share / frames_per_s:>13.0f}")
+        print(f"{node:<12} {rss0:>13.1f} {rss1:>11.1f} {pss1:>11.1f} {100 * share:>6.0f} "
+              f"{1e6 * share / frames_per_s:>13.0f}")
+    print(f"graph memory at the end: {sum(v[1] for v in end.values()):.0f} MB (PSS summed; RSS summed, which counts "
+          f"each shared page once per process: {sum(v[0] for v in end.values()):.0f} MB)")
     print(f"whole graph: {1e3 * total / frames_per_s:.1f} ms of CPU per frame, so {args.rate:.0f} Hz needs "
           f"{total / frames_per_s * args.rate:.1f} cores at this cost (this machine: {psutil.cpu_count()})")
 

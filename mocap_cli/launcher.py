@@ -2,8 +2,9 @@
 
 1. Plan: resolve node kinds, validate their params, give each process a PUB endpoint, and for each
    topic work out who publishes it and how many subscribers each publisher must see.
-2. Start: spawn ``python -m nodes.run SPEC`` per process (a container's nodes share one process and get
-   ``[SPEC, ...]``; between themselves they hand messages over as objects, heartbeats go over
+2. Start: a process per node, forked from a parent that loaded the graph's node kinds and kernels once
+   (nodes.forkserver), running what ``python -m nodes.run SPEC`` runs (a container's nodes share one process and
+   get ``[SPEC, ...]``; between themselves they hand messages over as objects, heartbeats go over
    ``inproc://``). Each node reports "ready" over the
    control socket once its XPUB has seen all its expected subscribers; when every node is ready the
    sources get "start". No sleeps: a source cannot send before the graph is wired.
@@ -18,10 +19,10 @@ import itertools
 import json
 import logging
 import os
+import multiprocessing
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -33,13 +34,13 @@ import zmq
 from mocap_cli.graph_registry import registry_path, write_registry
 from mocap_cli.launch_file import LaunchError, LaunchFile, NodeEntry
 from mocap_core.warmup import PARTS, ensure_compiled
+from nodes import forkserver
 from nodes.registry import UnknownKind, load_kind
 from nodes.runtime import DIAGNOSTICS, inproc_endpoint
 from nodes.spec import NodeSpec
 
 log = logging.getLogger("mocap.launch")
 STOP_GRACE_S = 1.5
-STANDBY_WAIT_S = 15.0  # longest the sources wait for the spare process to finish loading
 BACKOFF_FIRST_S, BACKOFF_MAX_S, BACKOFF_RESET_S = 0.1, 5.0, 10.0
 
 
@@ -63,7 +64,7 @@ class Process:
     """One OS process: a node, or a container of nodes that share one loop."""
     name: str
     nodes: list[Proc]
-    popen: subprocess.Popen | None = None
+    os_process: multiprocessing.Process | None = None
     started_at: float = 0.0
     restarts: int = 0
     failures_in_row: int = 0
@@ -213,46 +214,20 @@ class Launcher:
         self.exit_code = 0
         self.t0 = time.monotonic()
         self.registry = registry_path(lf.name)
-        self.standby: subprocess.Popen | None = None
-        self.standby_warm = False
 
     # -- processes -----------------------------------------------------------------------------------
     def _spawn(self, p: Process) -> None:
-        p.popen = subprocess.Popen([sys.executable, "-m", "nodes.run", p.argv()], stdin=subprocess.DEVNULL)
-        self._started(p)
-
-    def _started(self, p: Process) -> None:
+        p.os_process = forkserver.start(p.argv())
         p.started_at = time.monotonic()
         for n in p.nodes:
             n.ready, n.identity = False, None
-
-    def _spawn_standby(self) -> None:
-        """Keep one warm spare process: a restart hands it the dead node's spec instead of paying
-        for a new python's start-up and kernel loading."""
-        self.standby = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby", self.control_endpoint,
-                                         ",".join(self.kernels)], stdin=subprocess.PIPE)
-        self.standby_warm = False
-
-    def _respawn(self, p: Process) -> None:
-        spare, self.standby = self.standby, None
-        if spare is not None and spare.poll() is None:
-            try:
-                spare.stdin.write(p.argv().encode() + b"\n")
-                spare.stdin.close()
-                p.popen = spare
-                self._started(p)
-            except OSError:
-                self._spawn(p)
-        else:
-            self._spawn(p)
-        self._spawn_standby()
 
     def _write_registry(self) -> None:
         write_registry(self.lf.name, {
             "name": self.lf.name, "launch_file": os.path.abspath(self.launch_path) if self.launch_path else "",
             "launcher_pid": os.getpid(), "control": self.control_endpoint,
             "curve_keys": str(Path(self.lf.transport.curve_keys).resolve()) if self.lf.transport.curve_keys else None,
-            "nodes": [{"id": n.spec.id, "kind": n.spec.kind, "pid": p.popen.pid if p.popen else None,
+            "nodes": [{"id": n.spec.id, "kind": n.spec.kind, "pid": p.os_process.pid if p.os_process else None,
                        "endpoint": n.spec.pub_endpoint, "publishes": n.publishes, "subscribes": n.subscribes,
                        "restarts": p.restarts, "process": p.name} for p in self.processes for n in p.nodes],
         })
@@ -266,9 +241,9 @@ class Launcher:
                 return
             raise LaunchError(f"compiling the numba kernels failed (exit {e.returncode}); "
                               "`python -m mocap_core.warmup` shows why") from None
+        forkserver.preload(sorted({n.spec.kind for n in self.procs}), self.kernels)
         for p in self.processes:
             self._spawn(p)
-        self._spawn_standby()
         self._write_registry()
         log.info("graph %s: started %d nodes in %d processes", self.lf.name, len(self.procs), len(self.processes))
 
@@ -279,9 +254,6 @@ class Launcher:
             except zmq.Again:
                 return
             except ValueError:
-                continue
-            if verb == b"warm":
-                self.standby_warm = True
                 continue
             if verb == b"failed" and len(rest) >= 2:
                 self._setup_failed(rest[0].decode(errors="replace"), rest[1].decode(errors="replace"))
@@ -307,12 +279,8 @@ class Launcher:
         self.stop_requested = True
 
     def _maybe_start(self, now: float) -> None:
-        """Start the sources once every node is ready and the spare process has done its loading
-        (it would otherwise take a core from the graph's first second: 10-70 ms stalls)."""
+        """Start the sources once every node is ready."""
         if self.graph_started or not all(n.ready or p.finished for p in self.processes for n in p.nodes):
-            return
-        spare_busy = self.standby is not None and self.standby.poll() is None and not self.standby_warm
-        if spare_busy and now - self.t0 < STANDBY_WAIT_S:
             return
         self.graph_started = True
         log.info("graph %s ready in %.0f ms: starting sources", self.lf.name, (now - self.t0) * 1000)
@@ -324,19 +292,20 @@ class Launcher:
 
     def _watch(self, now: float) -> None:
         for p in self.processes:
-            if p.popen is None:
+            if p.os_process is None:
                 if p.restart_at is not None and now >= p.restart_at:
                     p.restart_at = None
                     for n in p.nodes:
                         n.spec = n.spec.model_copy(update={"restart": p.restarts})
-                    self._respawn(p)
+                    self._spawn(p)
                     self._write_registry()
-                    log.warning("restarted %s (restart #%d, pid %d)", p.label, p.restarts, p.popen.pid)
+                    log.warning("restarted %s (restart #%d, pid %d)", p.label, p.restarts, p.os_process.pid)
                 continue
-            code = p.popen.poll()
+            code = p.os_process.exitcode
             if code is None:
                 continue
-            p.popen = None
+            p.os_process.close()
+            p.os_process = None
             if code == 0 and p.is_source:
                 p.finished = True
                 log.info("source %s finished", p.name)
@@ -390,21 +359,17 @@ class Launcher:
         return self.exit_code
 
     def stop(self) -> None:
-        if self.standby is not None and self.standby.poll() is None:
-            self.standby.kill()  # holds no state
-            self.standby.wait()
-        alive = [p for p in self.processes if p.popen is not None and p.popen.poll() is None]
+        alive = [p for p in self.processes if p.os_process is not None and p.os_process.exitcode is None]
         for p in alive:
-            p.popen.send_signal(signal.SIGTERM)
+            p.os_process.terminate()
         deadline = time.monotonic() + STOP_GRACE_S
         for p in alive:
-            try:
-                p.popen.wait(timeout=max(0.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
+            p.os_process.join(max(0.0, deadline - time.monotonic()))
+            if p.os_process.exitcode is None:
                 log.warning("%s (pid %d) did not stop within %.1f s of SIGTERM: killing it", p.label,
-                            p.popen.pid, STOP_GRACE_S)
-                p.popen.kill()
-                p.popen.wait()
+                            p.os_process.pid, STOP_GRACE_S)
+                p.os_process.kill()
+                p.os_process.join()
         self.control.close(linger=0)
         self.zctx.term()
         self.registry.unlink(missing_ok=True)
@@ -412,7 +377,7 @@ class Launcher:
         log.info("graph %s stopped", self.lf.name)
 
     def status(self) -> list[dict]:
-        return [{"id": n.spec.id, "process": p.name, "pid": p.popen.pid if p.popen else None,
+        return [{"id": n.spec.id, "process": p.name, "pid": p.os_process.pid if p.os_process else None,
                  "restarts": p.restarts, "finished": p.finished} for p in self.processes for n in p.nodes]
 
 

@@ -15,7 +15,8 @@ from nodes.spec import NodeSpec
 
 
 def _die_with_parent() -> None:
-    """Linux: get SIGTERM if the launcher dies, even by SIGKILL, so no node is left behind."""
+    """Linux: get SIGTERM if the parent dies (the launcher, or its forkserver, which ends with it), even by SIGKILL,
+    so no node is left behind."""
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
         libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
@@ -25,41 +26,13 @@ def _die_with_parent() -> None:
         pass
 
 
-def _tell_launcher_warm(control_endpoint: str) -> None:
-    """The launcher holds the sources back until the spare is warm: its loading competes for the CPU."""
-    import zmq
-
-    ctx = zmq.Context.instance()
-    sock = ctx.socket(zmq.DEALER)
-    sock.setsockopt(zmq.LINGER, 1000)
-    sock.connect(control_endpoint)
-    sock.send(b"warm")
-    sock.close()
-
-
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    standby = bool(argv) and argv[0] == "--standby"
-    if not (len(argv) == 1 or (standby and len(argv) <= 3)):
-        print("usage: python -m nodes.run '<NodeSpec JSON>' | '[<NodeSpec JSON>, ...]' | --standby [CONTROL_ENDPOINT "
-              "[KERNEL,...]]  (normally started by `mocap launch`)", file=sys.stderr)
+    if len(argv) != 1:
+        print("usage: python -m nodes.run '<NodeSpec JSON>' | '[<NodeSpec JSON>, ...]'  (normally started by "
+              "`mocap launch`)", file=sys.stderr)
         return 2
     _die_with_parent()
-    if standby:
-        # A spare process for fast restarts: imports and loads the graph's kernels now, then waits for the spec
-        # of the node it has to replace on stdin (the launcher's; python start-up alone takes ~1.5 s).
-        from mocap_core.warmup import PARTS, warm_up
-
-        warm_up(PARTS if len(argv) < 3 else tuple(k for k in argv[2].split(",") if k), stamp=False)
-        if len(argv) >= 2:
-            _tell_launcher_warm(argv[1])
-        try:
-            line = sys.stdin.readline()
-        except KeyboardInterrupt:  # Ctrl-C reaches the whole process group; a spare holds nothing
-            return 0
-        if not line.strip():
-            return 0
-        argv = [line]
     nodes = [(spec, load_kind(spec.kind)) for spec in parse_specs(argv[0])]
     configure_logging(os.environ.get("MOCAP_LOG_LEVEL", "INFO"))
     profile_dir = os.environ.get("MOCAP_PROFILE_DIR")
@@ -83,11 +56,14 @@ def parse_specs(text: str) -> list[NodeSpec]:
     return [NodeSpec.model_validate_json(text)]
 
 
-if __name__ == "__main__":
-    code = main()
-    # Skip interpreter finalization: with numba and LLVM loaded it can take seconds on a busy machine,
-    # and the launcher gives a node 1.5 s after SIGTERM. Files and sockets are closed by now.
+def finish(code: int) -> None:
+    """End the process with ``code``, skipping the interpreter's finalization: with numba and LLVM loaded it can take
+    seconds on a busy machine, and the launcher gives a node 1.5 s after SIGTERM. Files and sockets are closed."""
     logging.shutdown()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
+
+
+if __name__ == "__main__":
+    finish(main())

@@ -136,31 +136,24 @@ def test_bad_launch_file_gives_clear_error(tmp_path):
     assert r.returncode == 2 and "bad params" in r.stderr
 
 
-def test_spare_process_reports_warm_on_the_control_socket(tmp_path):
-    # The launcher holds the sources back until its spare process has loaded the kernels: that
-    # loading would otherwise take a core from the graph's first second.
-    import subprocess
-    import sys
+def test_nodes_fork_from_one_warm_parent_that_dies_with_the_launcher(tmp_path):
+    # Every node process is forked from one parent that loaded the graph's node kinds once (nodes.forkserver), a
+    # child of the launcher, and so is a restarted one; kill -9 the launcher and that parent and every node go too.
+    import psutil
 
-    import zmq
-
-    from tests.conftest import REPO
-
-    ctx = zmq.Context.instance()
-    router = ctx.socket(zmq.ROUTER)
-    router.setsockopt(zmq.LINGER, 0)
-    endpoint = f"ipc://{tmp_path}/control"
-    router.bind(endpoint)
-    spare = subprocess.Popen([sys.executable, "-m", "nodes.run", "--standby", endpoint], cwd=REPO,
-                             stdin=subprocess.PIPE)
-    try:
-        assert router.poll(60_000), "the spare never said it was warm"
-        assert router.recv_multipart()[1] == b"warm"
-        assert spare.poll() is None  # and it still waits for the spec of a node to replace
-    finally:
-        spare.kill()
-        spare.wait()
-        router.close()
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, SMOKE.format(rate=200, frames=0, log=out)) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 5, 15, "frames through the graph")
+        pids = list(g.node_pids().values())
+        parents = {psutil.Process(p).ppid() for p in pids}
+        assert len(parents) == 1 and parents != {g.proc.pid}, parents
+        parent = parents.pop()
+        assert psutil.Process(parent).ppid() == g.proc.pid
+        os.kill(g.node_pids()["relay"], signal.SIGKILL)  # a restart is a fork of the same parent
+        new = wait_for(lambda: (p := g.node_pids().get("relay")) not in pids and p, 5, "a restarted relay")
+        assert psutil.Process(new).ppid() == parent
+        g.proc.kill()
+        wait_for(lambda: not any(pid_alive(p) for p in [parent, new, *pids]), 5, "no node left behind")
 
 
 def test_heartbeatpercentiles_match_numpy():
