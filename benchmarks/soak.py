@@ -10,7 +10,6 @@ layout for 1000 Hz), one process per node (launch/qtm_studio.yaml; about two cor
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 import tempfile
@@ -23,36 +22,11 @@ import psutil
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from mocap_cli.graph_registry import registry_path  # noqa: E402
 from mocap_cli.launcher import Launcher  # noqa: E402
-from mocap_cli.measure import LAYOUTS, capture_frames_missing, frame_log_figures, live_graph  # noqa: E402
+from mocap_cli.measure import LAYOUTS, capture_frames_missing, frame_log_figures, live_graph, usage  # noqa: E402
 from mocap_cli.qtm_sim import start_emulator  # noqa: E402
 
 TAKE = REPO.parent / "shared" / "data" / "08_cmu_135_02_karate_kata.c3d"
-
-
-def usage(graph: str) -> dict[str, tuple[float, float, float]]:
-    """Per process (a node, a container of nodes, and the forkserver they were forked from): (RSS in MB, PSS in MB,
-    CPU seconds used so far). PSS splits each shared page among the processes that share it: its sum is what the
-    graph holds."""
-    data = json.loads(registry_path(graph).read_text())
-    procs = {}
-    for n in data["nodes"]:
-        try:
-            procs.setdefault(n["process"], psutil.Process(n["pid"]))
-        except (psutil.Error, TypeError):
-            procs[n["process"]] = None
-    parent = next((p.parent() for p in procs.values() if p is not None), None)
-    if parent is not None and parent.pid != data["launcher_pid"]:
-        procs["forkserver"] = parent
-    out = {}
-    for name, p in procs.items():
-        try:
-            cpu, memory = p.cpu_times(), p.memory_full_info()
-            out[name] = (memory.rss / 2**20, memory.pss / 2**20, cpu.user + cpu.system)
-        except (psutil.Error, AttributeError):
-            out[name] = (float("nan"), float("nan"), float("nan"))
-    return out
 
 
 def main():

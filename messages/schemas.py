@@ -158,6 +158,15 @@ class Latency(BaseModel):
     samples: int = 0
 
 
+class Cpu(BaseModel):
+    """A process's CPU time so far (s): all of it, and (with MOCAP_CPU_SPLIT=1 in the node's environment) the part
+    spent in the node's handlers and, within them, in publishing (encoding and sending). The rest is the runtime's
+    own loop: receiving, decoding, statistics."""
+    process_s: float = 0.0
+    handlers_s: float = 0.0
+    publishing_s: float = 0.0
+
+
 class Heartbeat(Message):
     """Published by every node at 1 Hz on ``diagnostics``."""
 
@@ -175,6 +184,7 @@ class Heartbeat(Message):
     errors: dict[str, int] = {}          # per reason
     latency: Latency = Latency()         # entry_time -> receive, over the last second
     last_error: str = ""
+    cpu: Cpu = Cpu()
 
 
 ALL_MESSAGES: tuple[type[Message], ...] = (MarkerSet, MarkerFrame, SkeletonFrame, LimbSolution, RigPose, Heartbeat)

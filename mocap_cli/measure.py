@@ -3,10 +3,12 @@ frame log at its end, and the figures read back from that log."""
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
 
+from mocap_cli.graph_registry import registry_path
 from mocap_cli.launch_file import LaunchFile, NodeEntry, load_launch_file
 
 REPO = Path(__file__).resolve().parents[1]
@@ -61,3 +63,29 @@ def capture_frames_missing(path: str | Path) -> int:
         frames = np.array([int(r["frame"]) for r in csv.DictReader(f)])
     steps = np.diff(frames)
     return int((steps[steps > 0] - 1).sum()) if len(frames) > 1 else 0
+
+
+def usage(graph: str) -> dict[str, tuple[float, float, float]]:
+    """Per process (a node, a container of nodes, and the forkserver they were forked from): (RSS in MB, PSS in MB,
+    CPU seconds used so far). PSS splits each shared page among the processes that share it: its sum is what the
+    graph holds."""
+    import psutil
+
+    data = json.loads(registry_path(graph).read_text())
+    procs = {}
+    for n in data["nodes"]:
+        try:
+            procs.setdefault(n["process"], psutil.Process(n["pid"]))
+        except (psutil.Error, TypeError):
+            procs[n["process"]] = None
+    parent = next((p.parent() for p in procs.values() if p is not None), None)
+    if parent is not None and parent.pid != data["launcher_pid"]:
+        procs["forkserver"] = parent
+    out = {}
+    for name, p in procs.items():
+        try:
+            cpu, memory = p.cpu_times(), p.memory_full_info()
+            out[name] = (memory.rss / 2**20, memory.pss / 2**20, cpu.user + cpu.system)
+        except (psutil.Error, AttributeError):
+            out[name] = (float("nan"), float("nan"), float("nan"))
+    return out

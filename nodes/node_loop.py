@@ -109,11 +109,14 @@ class NodeLoop:
                 self.ready_sent = True
                 self.started = self.started or not self.node_cls.is_source  # only sources wait for "start"
         if self.node_cls.is_source and self.started and now >= self.next_tick:
+            t = time.thread_time() if ctx.cpu_split else 0.0
             try:
                 delay = node.tick()
             except Exception as e:  # a source error ends the source, not silently
                 ctx.handler_error("tick", e)
                 raise
+            if ctx.cpu_split:
+                ctx.stats.handlers_cpu_s += time.thread_time() - t
             if delay is None:
                 self.finished = True
                 ctx.log.info("source finished")
@@ -316,6 +319,7 @@ def _handle(ctx: NodeContext, node: Node, frames: list[bytes], wants_bytes: bool
 def _deliver(ctx: NodeContext, node: Node, logical: str, wire: str, msg: Message | None, payload: bytes | None,
              wants_bytes: bool) -> None:
     """Call the node's handler (with the wire bytes, encoding a handed-over message, if it wants them)."""
+    t = time.thread_time() if ctx.cpu_split else 0.0
     try:
         if wants_bytes:
             node.on_raw(wire, payload if payload is not None else encode(msg), msg)
@@ -323,6 +327,8 @@ def _deliver(ctx: NodeContext, node: Node, logical: str, wire: str, msg: Message
             node.on_message(logical, msg)
     except Exception as e:
         ctx.handler_error(logical, e)
+    if ctx.cpu_split:
+        ctx.stats.handlers_cpu_s += time.thread_time() - t
 
 
 def _stamped(ctx: NodeContext, hb: Heartbeat) -> Heartbeat:

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from messages import Header, Heartbeat, Latency
+from messages import Cpu, Header, Heartbeat, Latency
 
 DIAGNOSTICS = "diagnostics"
 
@@ -42,6 +42,8 @@ class NodeStats:
         self.latency_ns: list[int] = []
         self.errors: collections.Counter[str] = collections.Counter()
         self.last_error = ""
+        self.handlers_cpu_s = 0.0     # (counted with MOCAP_CPU_SPLIT=1 only: two clock reads a call)
+        self.publishing_cpu_s = 0.0
 
     def count_error(self, reason: str, text: str, n: int = 1) -> None:
         """Count ``n`` of ``reason``; the text logged for the first few of each reason and then every 1000th, so a
@@ -86,6 +88,8 @@ class NodeStats:
             drops={t: s.drops for t, s in self.received.items()},
             lost_frames={t: s.lost_frames for t, s in self.received.items() if s.lost_frames},
             errors=dict(self.errors), latency=latency, last_error=self.last_error[:500],
+            cpu=Cpu(process_s=time.process_time(), handlers_s=self.handlers_cpu_s,
+                    publishing_s=self.publishing_cpu_s),
         )
 
 

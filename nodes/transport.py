@@ -5,6 +5,7 @@ from __future__ import annotations
 import collections
 import copy
 import logging
+import os
 import time
 
 import zmq
@@ -55,6 +56,7 @@ class NodeContext:
         self.in_hand: Message | None = None  # the handed-over message being handled now (shared: not ours)
         self.received_ns = 0  # when the message being handled arrived (before decoding: a bag's receive time)
         self.default_up_axis = ""  # stamped where the source did not say it (a node with a profile sets it)
+        self.cpu_split = os.environ.get("MOCAP_CPU_SPLIT") == "1"  # count handlers' and publishing's CPU
         for cls in ALL_MESSAGES:  # (a node typed `Message`, like the recorder, may get any of them)
             prepare(cls)  # the first frame through a node should cost what every other one does
 
@@ -168,6 +170,14 @@ class NodeContext:
         read-only, so give it arrays of its own (not views of a buffer the node keeps writing)."""
         if self.pub is None:
             return
+        if self.cpu_split:
+            t = time.thread_time()
+            self._publish(topic, msg, source)
+            self.stats.publishing_cpu_s += time.thread_time() - t
+        else:
+            self._publish(topic, msg, source)
+
+    def _publish(self, topic: str, msg: Message, source: Message | None) -> None:
         if msg is self.in_hand:  # a neighbour's message, republished: stamp a copy, others hold this one
             msg = copy.copy(msg)
             msg.__dict__["header"] = copy.copy(msg.header)

@@ -165,3 +165,14 @@ def test_heartbeatpercentiles_match_numpy():
     for n in (1, 2, 7, 1000):
         values = rng.exponential(2.0, n)
         assert np.allclose(percentiles(values, (50, 95, 99)), np.percentile(values, [50, 95, 99]))
+
+
+def test_heartbeats_split_a_nodes_cpu_between_its_handlers_and_the_runtime(tmp_path, monkeypatch):
+    # benchmarks/node_cpu.py reads these: the process's CPU, and with MOCAP_CPU_SPLIT=1 the part in the handlers
+    # and, within them, in publishing.
+    monkeypatch.setenv("MOCAP_CPU_SPLIT", "1")
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, SMOKE.format(rate=200, frames=0, log=out)) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 100, 15, "frames through the graph")
+        cpu = g.heartbeats(1.5)["relay"].cpu
+    assert cpu.process_s > cpu.handlers_s > cpu.publishing_s > 0, cpu
