@@ -11,42 +11,47 @@ Every line of the draft says which label it guessed from and why, for the user t
 from __future__ import annotations
 
 import json
+import os
 import re
 from dataclasses import dataclass
 
 # landmark stem -> names (token tuples, most specific first); sided unless the stem is a midline landmark
 NAMES: dict[str, tuple[tuple[str, ...], ...]] = {
-    "SACR": (("SACR",), ("SACRUM",), ("SACRAL",), ("SACRO",)),
+    "SACR": (("SACR",), ("SACRUM",), ("SACRAL",), ("SACRO",), ("V", "SACRAL")),
     "IAS": (("IAS",), ("ASIS",), ("ASI",), ("EIAS",), ("FWT",), ("HIP", "F")),
     "IPS": (("IPS",), ("PSIS",), ("PSI",), ("EIPS",), ("BWT",), ("HIP", "B")),
-    "TV12": (("TV12",), ("T12",), ("TH12",), ("T10",), ("TV10",), ("T8",), ("TV8",), ("SPINE",)),
+    "TV12": (("TV12",), ("T12",), ("TH12",), ("T10",), ("TV10",), ("T8",), ("TV8",), ("SPINE",), ("MID", "BACK"),
+             ("MIDBACK",), ("BBAC",)),
     "TV2": (("TV2",), ("T2",), ("C7",), ("CV7",)),
-    "SME": (("SME",), ("CLAV",), ("SNJ",), ("SJN",), ("JN",), ("STRN",), ("STERNUM",), ("STER",), ("SXS",)),
+    "SME": (("SME",), ("CLAV",), ("SNJ",), ("SJN",), ("JN",), ("STRN",), ("STERNUM",), ("STER",), ("MAN",),
+            ("MANUBRIUM",), ("SXS",), ("XYPH",), ("XIPHOID",)),
     "SGL": (("SGL",), ("GLAB",), ("FOREHEAD",)),
     "HDF": (("FHD",), ("HDF",), ("HEAD", "F"), ("HEAD", "FRONT")),
     "HDB": (("BHD",), ("HDB",), ("HEAD", "B"), ("HEAD", "BACK")),
     "HEAD": (("HEAD",),),
-    "SAE": (("SAE",), ("SHO",), ("SHOULDER",), ("ACR",), ("ACROMION",), ("AC",), ("SAJ",)),
-    "HLE": (("HLE",), ("ELB",), ("ELBOW", "LAT"), ("EPI", "LAT"), ("ELBL",), ("LEL",), ("ELBOW",)),
-    "HME": (("HME",), ("ELBOW", "MED"), ("EPI", "MED"), ("ELBM",), ("MEL",), ("IEL",), ("MELB",)),
+    "SHF": (("FSH",), ("SHOULDER", "F"), ("SHOULDER", "FRONT")),
+    "SHB": (("BSH",), ("SHOULDER", "B"), ("SHOULDER", "BACK")),
+    "SAE": (("SAE",), ("SHO",), ("SHOULDER",), ("ACR",), ("ACROMION",), ("ACROMIUM",), ("AC",), ("SAJ",)),
+    "HLE": (("HLE",), ("ELB",), ("ELBOW", "LAT"), ("EPI", "LAT"), ("ELBL",), ("LEL",), ("LEE",), ("ELBOW",)),
+    "HME": (("HME",), ("ELBOW", "MED"), ("EPI", "MED"), ("ELBM",), ("MEL",), ("IEL",), ("MELB",), ("MEE",)),
     "UOA": (("UOA",), ("OLEC",), ("OLECRANON",)),
-    "RSP": (("RSP",), ("WRA",), ("WRIST", "RAD"), ("WRR",), ("OWR",), ("RADIUS",), ("RAD",)),
-    "USP": (("USP",), ("WRB",), ("WRIST", "ULN"), ("WRU",), ("IWR",), ("UHE",), ("ULNA",), ("ULN",)),
+    "RSP": (("RSP",), ("WRA",), ("WRIST", "RAD"), ("WRR",), ("OWR",), ("RADIUS",), ("RAD",), ("WRIST", "LAT"),
+            ("LW",), ("WRIST",), ("WRI",), ("WRS",)),
+    "USP": (("USP",), ("WRB",), ("WRIST", "ULN"), ("WRU",), ("IWR",), ("UHE",), ("ULNA",), ("ULN",), ("WRIST", "MED"),
+            ("MW",)),
     "HM2": (("HM2",), ("FIN",), ("MCP2",), ("FINGER",), ("HAND",), ("IHAND",)),
     "PAS": (("PAS",), ("PAT",), ("PATELLA",)),
-    "FLE": (("FLE",), ("KNE",), ("KNEE", "LAT"), ("KNEL",), ("LKNE",), ("KNEE",)),
-    "FME": (("FME",), ("KNEE", "MED"), ("KNM",), ("KNEM",), ("KNI",), ("MKNE",)),
+    "FLE": (("FLE",), ("KNE",), ("KNEE", "LAT"), ("KNEL",), ("LKNE",), ("LKE",), ("LEK",), ("KNEE",)),
+    "FME": (("FME",), ("KNEE", "MED"), ("KNM",), ("KNEM",), ("KNI",), ("MKNE",), ("MKE",), ("MEK",)),
     "TTC": (("TTC",), ("TTA",), ("TT",), ("TIBTUB",)),
-    "FAL": (("FAL",), ("ANK",), ("ANKLE", "LAT"), ("LMAL",), ("ANKL",), ("ANKLE",)),
-    "TAM": (("TAM",), ("ANKLE", "MED"), ("MMAL",), ("ANKM",), ("MED", "MAL")),
+    "FAL": (("FAL",), ("ANK",), ("ANKLE", "LAT"), ("LMAL",), ("ANKL",), ("LM",), ("ANKLE",)),
+    "TAM": (("TAM",), ("ANKLE", "MED"), ("MMAL",), ("ANKM",), ("MED", "MAL"), ("MANK",), ("MM",)),
     "FCC": (("FCC",), ("HEE",), ("HEEL",), ("HEL",), ("CALC",), ("CALCA",), ("CAL",)),
     "FM2": (("FM2",), ("TOE",), ("MT2",), ("TOE2",), ("TOE", "TIP")),
-    "FM1": (("FM1",), ("MT1",), ("BIG", "TOE"), ("BIGTOE",), ("FOOT", "MED")),
-    "FM5": (("FM5",), ("MT5",), ("PINKIE",), ("FOOT", "LAT")),
+    "FM1": (("FM1",), ("MT1",), ("BIG", "TOE"), ("BIGTOE",), ("FOOT", "MED"), ("1META",), ("P1MT",)),
+    "FM5": (("FM5",), ("MT5",), ("PINKIE",), ("FOOT", "LAT"), ("5META",), ("P5MT",)),
 }
 MIDLINE = {"SACR", "TV12", "TV2", "SME", "SGL"}
-WHY = {"IPS": "posterior iliac spines", "HDF": "front of the head", "HDB": "back of the head",
-       "FM1": "1st metatarsal", "FM5": "5th metatarsal"}
 _SIDE_WORDS = {"L": "L", "LEFT": "L", "LT": "L", "R": "R", "RIGHT": "R", "RT": "R"}
 _ALL_NAMES = {n for names in NAMES.values() for name in names for n in name}
 
@@ -58,9 +63,10 @@ class Label:
     name: tuple[str, ...]
 
 
-def parse(label: str) -> Label:
-    """'male:LKNE' -> (L, KNE); 'R.Knee.Lat' -> (R, KNEE LAT); 'Hip_FL' -> (L, HIP F); 'L_HEAD' -> (L, HEAD)."""
-    text = label.rsplit(":", 1)[-1].strip()
+def parse(label: str, prefix: str = "") -> Label:
+    """'male:LKNE' -> (L, KNE); 'R.Knee.Lat' -> (R, KNEE LAT); 'Hip_FL' -> (L, HIP F); 'L_HEAD' -> (L, HEAD);
+    ``prefix``: what every label starts with, not read ('S01_LKNE' -> (L, KNE))."""
+    text = label.rsplit(":", 1)[-1].strip()[len(prefix):]
     text = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", text)          # camelCase -> words
     tokens = [t.upper() for t in re.split(r"[^A-Za-z0-9]+", text) if t]
     side = None
@@ -87,10 +93,20 @@ def _find(labels: list[Label], stem: str, side: str | None) -> tuple[str, tuple[
 
 
 def draft(labels: list[str]) -> tuple[dict[str, str], dict[str, str], list[str]]:
-    """(landmark -> expression, landmark -> why, landmarks not found)."""
+    """(landmark -> expression, landmark -> why, landmarks not found). Labels that all start alike (a subject's
+    initial or number: 'S01_LKNE', 'JLKNE') are also read without that prefix, and the reading that finds more
+    landmarks is kept (a set of one side's markers starts alike too: 'LASI', 'LKNE')."""
+    bases = [x.rsplit(":", 1)[-1].strip() for x in labels]
+    common = os.path.commonprefix(bases) if len(bases) > 1 else ""
+    readings = [_draft([parse(x) for x in labels])]
+    if common and len(common) < min(map(len, bases)):
+        readings.append(_draft([parse(x, common) for x in labels]))
+    return max(readings, key=lambda r: len(r[0]))
+
+
+def _draft(parsed: list[Label]) -> tuple[dict[str, str], dict[str, str], list[str]]:
     from mocap_core.profiles import LANDMARKS
 
-    parsed = [parse(x) for x in labels]
     got: dict[str, str] = {}
     why: dict[str, str] = {}
 
@@ -114,6 +130,9 @@ def draft(labels: list[str]) -> tuple[dict[str, str], dict[str, str], list[str]]
         if f"{side}_HEAD" not in got and one("HDF", side) and one("HDB", side):
             got[f"{side}_HEAD"] = f"mean({one('HDF', side)}, {one('HDB', side)})"
             why[f"{side}_HEAD"] = "the mean of the front and back head markers on that side"
+        if f"{side}_SAE" not in got and one("SHF", side) and one("SHB", side):
+            got[f"{side}_SAE"] = f"mean({one('SHF', side)}, {one('SHB', side)})"
+            why[f"{side}_SAE"] = "the mean of the front and back shoulder markers on that side"
         if f"{side}_FM2" not in got and one("FM1", side) and one("FM5", side):
             got[f"{side}_FM2"] = f"mean({one('FM1', side)}, {one('FM5', side)})"
             why[f"{side}_FM2"] = "the mean of the 1st and 5th metatarsal markers"
