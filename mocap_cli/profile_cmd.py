@@ -41,6 +41,10 @@ def cmd_explain(args) -> int:
         if profile is not None:
             line += f"\n        {profile.name}: {profile.landmarks.get(name, '(not in the profile)')}"
         print(line)
+    if profile is not None:  # (what `mocap check` says of it, word for word)
+        never = describe_missing(unlocatable(frozenset(profile.landmarks)))
+        print(f"\nJoints {profile.name} cannot locate:")
+        print("\n".join(f"- {line}" for line in never) if never else "None: its landmarks locate every joint.")
     return 0
 
 

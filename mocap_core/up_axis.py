@@ -61,6 +61,38 @@ def take_up_axis(rec: Recording, profile: Profile, log=None) -> str:
     return found
 
 
+class StreamUpCheck:
+    """A live stream's stated up axis (QTM's, a source's) against what its frames show: frames kept every
+    ``SAMPLE_S`` for ``SPAN_S`` of capture time, then a look (the next span's, where these frames cannot say: an actor
+    standing still). ``add`` returns a sentence once, where they disagree."""
+
+    SAMPLE_S, SPAN_S = 0.05, 5.0
+
+    def __init__(self):
+        self.kept: list[np.ndarray] = []
+        self.first_s = self.next_s = None
+        self.done = False
+
+    def add(self, landmarks: np.ndarray, stated: str, time_s: float) -> str | None:
+        if self.done or not stated:
+            return None
+        if self.first_s is None:
+            self.first_s = self.next_s = time_s
+        if time_s >= self.next_s:
+            self.kept.append(landmarks.copy())
+            self.next_s = time_s + self.SAMPLE_S
+        if time_s - self.first_s < self.SPAN_S:
+            return None
+        found = up_from_landmarks(np.stack(self.kept))
+        self.kept, self.first_s = [], None
+        if found is None:
+            return None
+        self.done = True
+        if found == normalize_up(stated):
+            return None
+        return (f"the stream says {stated} is up, but its head stands above its feet along {found}: the avatar, BVH "
+                f"and VMC will lie on their backs (set the source's up_axis param to {found})")
+
 
 def recording_up_axis(rec: Recording, log=None) -> str | None:
     """A recording's up axis with no profile given (a file source, the QTM emulator, a draft): the file's word,

@@ -24,6 +24,7 @@ from mocap_core.landmark_needs import describe_missing, unlocatable
 from mocap_core.marker_gate import MarkerGate
 from mocap_core.presets import PRESET_HELP, Preset, with_preset
 from mocap_core.profiles import AUTO, LANDMARKS, load_profile, profile_for
+from mocap_core.up_axis import StreamUpCheck
 from mocap_core.warmup import hip_parts
 from nodes.runtime import Node
 
@@ -60,6 +61,7 @@ class HipInterpolation(Node):
         self.labels: list[str] | None = None
         self.map = None
         self.gate = MarkerGate()  # markers no body could have put there never reach what the stages learn
+        self.up_check = StreamUpCheck()
 
     def _use(self, profile) -> None:
         self.profile = profile
@@ -83,6 +85,9 @@ class HipInterpolation(Node):
         for k in np.flatnonzero(dropped):
             self.ctx.count_error("marker_jump", f"{msg.labels[k]} moved faster than a body can: dropped this frame")
         lm = self.map.apply(positions)
+        said = self.up_check.add(lm, msg.header.up_axis, msg.header.capture_time_s)
+        if said:
+            self.log.warning(said)
         hips, interpolated = self.hips.fill(lm[HIP_INDEX], lm[ANCHOR_INDEX])
         lm[HIP_INDEX] = hips
         rebuilt = self.fills.fill(lm, self.map.tracking(positions) if self.fills.fills else None,

@@ -62,6 +62,9 @@ def test_a_profile_that_cannot_locate_some_joints_is_refused_and_named(tmp_path)
     assert r.returncode == 0 and "never located: knee_r: needs R_FLE" in r.stderr
     r = mocap("check", str(data_file(KARATE)), "--profile", str(profile), "--no-plots", "--report", str(tmp_path))
     assert r.returncode == 0 and "- ankle_l: needs L_FLE" in r.stdout
+    check = {line for line in r.stdout.splitlines() if line.startswith("- ") and ": needs " in line}
+    r = mocap("profile", "explain", "--profile", str(profile))  # the same words as check
+    assert r.returncode == 0 and check and check <= set(r.stdout.splitlines()), r.stdout[-800:]
 
 
 def test_a_take_of_several_actors_is_solved_one_actor_at_a_time(tmp_path):

@@ -38,3 +38,16 @@ def test_a_profile_that_says_the_wrong_axis_is_overruled_and_said(caplog):
     with caplog.at_level("WARNING", logger="test.up"):
         assert take_up_axis(rec, load_profile("cmu41"), logging.getLogger("test.up")) == "+z"
     assert "along +y" in caplog.text
+
+
+@pytest.mark.parametrize("stated,said", [("+z", True), ("+y", False), ("", False)])
+def test_a_live_stream_that_states_the_wrong_axis_is_said_once(stated, said):
+    from mocap_core.up_axis import StreamUpCheck
+
+    rec, prof = read_recording(data_file(TAKES[2][0])), load_profile("vicon53")  # +y up
+    lm = prof.resolve(rec.labels).apply(rec.positions)
+    check = StreamUpCheck()
+    sentences = [s for f in range(rec.n_frames) if (s := check.add(lm[f], stated, f / rec.rate_hz))]
+    assert len(sentences) == (1 if said else 0), sentences
+    if said:
+        assert "says +z is up" in sentences[0] and "along +y" in sentences[0] and "up_axis" in sentences[0]
