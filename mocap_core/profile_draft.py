@@ -17,39 +17,44 @@ from dataclasses import dataclass
 
 # landmark stem -> names (token tuples, most specific first); sided unless the stem is a midline landmark
 NAMES: dict[str, tuple[tuple[str, ...], ...]] = {
-    "SACR": (("SACR",), ("SACRUM",), ("SACRAL",), ("SACRO",), ("V", "SACRAL")),
-    "IAS": (("IAS",), ("ASIS",), ("ASI",), ("EIAS",), ("FWT",), ("HIP", "F")),
-    "IPS": (("IPS",), ("PSIS",), ("PSI",), ("EIPS",), ("BWT",), ("HIP", "B")),
+    "SACR": (("SACR",), ("SACRUM",), ("SACRAL",), ("SACRO",), ("V", "SACRAL"), ("WAIST", "BACK")),
+    "IAS": (("IAS",), ("ASIS",), ("ASI",), ("EIAS",), ("FWT",), ("HIP", "F"), ("WAIST", "FRONT")),
+    "IPS": (("IPS",), ("PSIS",), ("PSI",), ("EIPS",), ("BWT",), ("HIP", "B"), ("WAIST", "BACK")),
     "TV12": (("TV12",), ("T12",), ("TH12",), ("T10",), ("TV10",), ("T8",), ("TV8",), ("SPINE",), ("MID", "BACK"),
-             ("MIDBACK",), ("BBAC",)),
-    "TV2": (("TV2",), ("T2",), ("C7",), ("CV7",)),
+             ("MIDBACK",), ("BBAC",), ("SPINE", "THORACIC12")),
+    "TV2": (("TV2",), ("T2",), ("C7",), ("CV7",), ("SPINE", "THORACIC2"), ("BACK", "TOP"), ("SPINE", "TOP")),
     "SME": (("SME",), ("CLAV",), ("SNJ",), ("SJN",), ("JN",), ("STRN",), ("STERNUM",), ("STER",), ("MAN",),
-            ("MANUBRIUM",), ("SXS",), ("XYPH",), ("XIPHOID",)),
-    "SGL": (("SGL",), ("GLAB",), ("FOREHEAD",)),
+            ("MANUBRIUM",), ("CHEST",), ("SXS",), ("XYPH",), ("XIPHOID",)),
+    "SGL": (("SGL",), ("GLAB",), ("FOREHEAD",), ("HEAD", "FRONT")),
     "HDF": (("FHD",), ("HDF",), ("HEAD", "F"), ("HEAD", "FRONT")),
     "HDB": (("BHD",), ("HDB",), ("HEAD", "B"), ("HEAD", "BACK")),
     "HEAD": (("HEAD",),),
     "SHF": (("FSH",), ("SHOULDER", "F"), ("SHOULDER", "FRONT")),
     "SHB": (("BSH",), ("SHOULDER", "B"), ("SHOULDER", "BACK")),
-    "SAE": (("SAE",), ("SHO",), ("SHOULDER",), ("ACR",), ("ACROMION",), ("ACROMIUM",), ("AC",), ("SAJ",)),
-    "HLE": (("HLE",), ("ELB",), ("ELBOW", "LAT"), ("EPI", "LAT"), ("ELBL",), ("LEL",), ("LEE",), ("ELBOW",)),
-    "HME": (("HME",), ("ELBOW", "MED"), ("EPI", "MED"), ("ELBM",), ("MEL",), ("IEL",), ("MELB",), ("MEE",)),
+    "SAE": (("SAE",), ("SHO",), ("SHOULDER",), ("ACR",), ("ACROMION",), ("ACROMIUM",), ("AC",), ("SAJ",),
+            ("SHOULDER", "TOP")),
+    "HLE": (("HLE",), ("ELB",), ("ELBOW", "LAT"), ("EPI", "LAT"), ("ELBL",), ("LEL",), ("LEE",), ("ELBOW", "OUT"),
+            ("ELBOW",)),
+    "HME": (("HME",), ("ELBOW", "MED"), ("EPI", "MED"), ("ELBM",), ("MEL",), ("IEL",), ("MELB",), ("MEE",),
+            ("ELBOW", "IN")),
     "UOA": (("UOA",), ("OLEC",), ("OLECRANON",)),
     "RSP": (("RSP",), ("WRA",), ("WRIST", "RAD"), ("WRR",), ("OWR",), ("RADIUS",), ("RAD",), ("WRIST", "LAT"),
-            ("LW",), ("WRIST",), ("WRI",), ("WRS",)),
+            ("LW",), ("WRIST", "OUT"), ("WRIST",), ("WRI",), ("WRS",)),
     "USP": (("USP",), ("WRB",), ("WRIST", "ULN"), ("WRU",), ("IWR",), ("UHE",), ("ULNA",), ("ULN",), ("WRIST", "MED"),
-            ("MW",)),
-    "HM2": (("HM2",), ("FIN",), ("MCP2",), ("FINGER",), ("HAND",), ("IHAND",)),
+            ("MW",), ("WRIST", "IN")),
+    "HM2": (("HM2",), ("FIN",), ("MCP2",), ("FINGER",), ("HAND",), ("IHAND",), ("HAND", "IN"), ("HAND", "OUT")),
     "PAS": (("PAS",), ("PAT",), ("PATELLA",)),
-    "FLE": (("FLE",), ("KNE",), ("KNEE", "LAT"), ("KNEL",), ("LKNE",), ("LKE",), ("LEK",), ("KNEE",)),
-    "FME": (("FME",), ("KNEE", "MED"), ("KNM",), ("KNEM",), ("KNI",), ("MKNE",), ("MKE",), ("MEK",)),
+    "FLE": (("FLE",), ("KNE",), ("KNEE", "LAT"), ("KNEL",), ("LKNE",), ("LKE",), ("LEK",), ("KNEE", "OUT"), ("KNEE",)),
+    "FME": (("FME",), ("KNEE", "MED"), ("KNM",), ("KNEM",), ("KNI",), ("MKNE",), ("MKE",), ("MEK",), ("KNEE", "IN")),
     "TTC": (("TTC",), ("TTA",), ("TT",), ("TIBTUB",)),
-    "FAL": (("FAL",), ("ANK",), ("ANKLE", "LAT"), ("LMAL",), ("ANKL",), ("LM",), ("ANKLE",)),
-    "TAM": (("TAM",), ("ANKLE", "MED"), ("MMAL",), ("ANKM",), ("MED", "MAL"), ("MANK",), ("MM",)),
-    "FCC": (("FCC",), ("HEE",), ("HEEL",), ("HEL",), ("CALC",), ("CALCA",), ("CAL",)),
+    "FAL": (("FAL",), ("ANK",), ("ANKLE", "LAT"), ("LMAL",), ("ANKL",), ("LM",), ("ANKLE", "OUT"), ("ANKLE",)),
+    "TAM": (("TAM",), ("ANKLE", "MED"), ("MMAL",), ("ANKM",), ("MED", "MAL"), ("MANK",), ("MM",), ("ANKLE", "IN")),
+    "FCC": (("FCC",), ("HEE",), ("HEEL",), ("HEL",), ("CALC",), ("CALCA",), ("CAL",), ("HEEL", "BACK")),
     "FM2": (("FM2",), ("TOE",), ("MT2",), ("TOE2",), ("TOE", "TIP")),
-    "FM1": (("FM1",), ("MT1",), ("BIG", "TOE"), ("BIGTOE",), ("FOOT", "MED"), ("1META",), ("P1MT",)),
-    "FM5": (("FM5",), ("MT5",), ("PINKIE",), ("FOOT", "LAT"), ("5META",), ("P5MT",)),
+    "FM1": (("FM1",), ("MT1",), ("BIG", "TOE"), ("BIGTOE",), ("FOOT", "MED"), ("1META",), ("P1MT",), ("TOE", "IN"),
+            ("FOREFOOT", "IN")),
+    "FM5": (("FM5",), ("MT5",), ("PINKIE",), ("FOOT", "LAT"), ("5META",), ("P5MT",), ("TOE", "OUT"),
+            ("FOREFOOT", "OUT")),
 }
 MIDLINE = {"SACR", "TV12", "TV2", "SME", "SGL"}
 _SIDE_WORDS = {"L": "L", "LEFT": "L", "LT": "L", "R": "R", "RIGHT": "R", "RT": "R"}
@@ -67,7 +72,7 @@ def parse(label: str, prefix: str = "") -> Label:
     """'male:LKNE' -> (L, KNE); 'R.Knee.Lat' -> (R, KNEE LAT); 'Hip_FL' -> (L, HIP F); 'L_HEAD' -> (L, HEAD);
     ``prefix``: what every label starts with, not read ('S01_LKNE' -> (L, KNE))."""
     text = label.rsplit(":", 1)[-1].strip()[len(prefix):]
-    text = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", text)          # camelCase -> words
+    text = re.sub(r"(?<=[a-z])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])", " ", text)  # camelCase -> words ("WaistLFront")
     tokens = [t.upper() for t in re.split(r"[^A-Za-z0-9]+", text) if t]
     side = None
     rest = []

@@ -1,5 +1,6 @@
 """Drafting a profile from the labels of marker-set conventions we do not ship: the takes of ../shared/data with
-their labels renamed by the published tables of two OpenSim conventions, with and without a subject prefix."""
+their labels renamed by the published tables of OpenSim's, OptiTrack Motive's and Qualisys's conventions, with and
+without a subject prefix."""
 import pytest
 
 from tests.conftest import data_file
@@ -15,6 +16,16 @@ OPENSIM = {"FWT": "{s}.ASIS", "BWT": "{s}.PSIS", "KNE": "{s}.Knee.Lat", "ANK": "
 HUMAN_BODY = {"FWT": "{s}ASIS", "BWT": "{s}PSIS", "KNE": "{s}LKE", "KNI": "{s}MKE", "ANK": "{s}LM", "ELB": "{s}LEE",
               "IEL": "{s}MEE", "WRA": "{s}LW", "WRB": "{s}MW", "OWR": "{s}LW", "IWR": "{s}MW", "FHD": "{s}HEAD",
               "THI": "F{s}THI", "SHN": "{s}ATI", "UPA": "{s}DELT"}
+# OptiTrack Motive's baseline set ("WaistLFront", "LKneeOut", "LWristIn", ...; head markers kept as they are)
+MOTIVE = {"FWT": "Waist{s}Front", "BWT": "Waist{s}Back", "KNE": "{s}KneeOut", "KNI": "{s}KneeIn", "ANK": "{s}AnkleOut",
+          "HEE": "{s}Heel", "HEL": "{s}HeelBack", "TOE": "{s}ToeTip", "MT1": "{s}ToeIn", "MT5": "{s}ToeOut",
+          "SHO": "{s}ShoulderTop", "ELB": "{s}ElbowOut", "IEL": "{s}ElbowIn", "WRA": "{s}WristOut", "WRB": "{s}WristIn",
+          "OWR": "{s}WristOut", "IWR": "{s}WristIn", "FIN": "{s}HandOut", "IHAND": "{s}HandIn", "OHAND": "{s}HandOut",
+          "THI": "{s}Thigh", "SHN": "{s}Shin", "UPA": "{s}UArmHigh", "STRN": "Chest", "C7": "BackTop", "T10": "T10",
+          "FSH": "{s}ShoulderFront", "BSH": "{s}ShoulderBack"}
+# Qualisys's animation set ("Q_WaistLFront", "Q_SpineThoracic12", "Q_LShoulderTop", ...)
+QUALISYS_ANIMATION = {**MOTIVE, "C7": "SpineThoracic2", "T10": "SpineThoracic12", "FHD": "Head{s}Front",
+                      "BHD": "Head{s}Back"}
 TAKES = ["08_cmu_135_02_karate_kata.c3d", "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"]
 
 
@@ -28,7 +39,7 @@ def renamed(label: str, table: dict[str, str], prefix: str) -> str:
 
 
 @pytest.mark.parametrize("take", TAKES)
-@pytest.mark.parametrize("convention", ["opensim", "human_body"])
+@pytest.mark.parametrize("convention", ["opensim", "human_body", "motive", "qualisys_animation"])
 @pytest.mark.parametrize("prefix", ["", "S01_", "J"])
 def test_a_draft_locates_what_the_shipped_profile_does(take, convention, prefix):
     """At least 90 % of the joint-frames the shipped profile locates, from the draft of the renamed labels."""
@@ -38,7 +49,9 @@ def test_a_draft_locates_what_the_shipped_profile_does(take, convention, prefix)
     from mocap_core.recordings import read_recording
 
     rec = read_recording(data_file(take))
-    table = {"opensim": OPENSIM, "human_body": HUMAN_BODY}[convention]
+    table = {"opensim": OPENSIM, "human_body": HUMAN_BODY, "motive": MOTIVE,
+             "qualisys_animation": QUALISYS_ANIMATION}[convention]
+    prefix = "Q_" + prefix if convention == "qualisys_animation" else prefix
     labels = [renamed(x, table, prefix) for x in rec.labels]
     landmarks, _, _ = draft(labels)
     positions = rec.positions[:600].astype(float)
