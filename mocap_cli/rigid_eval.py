@@ -78,13 +78,15 @@ def run(args) -> int:
     return 0
 
 
-SUMMARY_METHODS = ("thesis", "studio", "fit", "fit_subject")
+SUMMARY_METHODS = ("thesis", "studio", "studio_subject", "fit", "fit_subject")
+CV_METHODS = ("thesis", "studio", "fit")  # (with nothing hidden a subject's solve is the method's own)
 
 
 def summary(rows: list[dict]) -> str:
     """One line per take: the worst case, the elbows and the knees with ankles, each as the mean mm over both sides
-    (against the method's own complete solve) of the thesis's method / the studio options / the fit / the fit of a
-    subject calibrated first; and the limb bones' length CV with every marker seen."""
+    (against the method's own complete solve) of the thesis's method / the studio options / the studio options with
+    a subject calibrated first / the fit / the fit of that subject; and the limb bones' length CV with every marker
+    seen."""
     def mean(take, method, prefix):
         got = [r["mean_mm"] for r in rows
                if r["take"] == take and r["method"] == method and r["case"].startswith(prefix)]
@@ -94,11 +96,12 @@ def summary(rows: list[dict]) -> str:
         return _f(next((r["bone_cv_pct"] for r in rows if r["take"] == take and r["method"] == method
                         and r["case"] == "all"), float("nan")), 1) or "-"
 
-    lines = [f"Mean mm over both sides; each cell {' / '.join(SUMMARY_METHODS)} (bone CV: the first three).", "",
+    lines = [f"Mean mm over both sides; each cell {' / '.join(SUMMARY_METHODS)} (bone CV: {' / '.join(CV_METHODS)}).",
+             "",
              "| take | worst case | elbow hidden | knee + ankle hidden | bone CV % |", "|---|---|---|---|---|"]
     for take in dict.fromkeys(r["take"] for r in rows):
         cells = [" / ".join(mean(take, m, case) for m in SUMMARY_METHODS) for case in ("worst", "elbow", "knee_ankle")]
-        lines.append(f"| {take} | {' | '.join(cells)} | {' / '.join(cv(take, m) for m in SUMMARY_METHODS[:3])} |")
+        lines.append(f"| {take} | {' | '.join(cells)} | {' / '.join(cv(take, m) for m in CV_METHODS)} |")
     return "\n".join(lines) + "\n"
 
 

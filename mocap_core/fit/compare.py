@@ -5,7 +5,8 @@ each way and measures the hidden joints against each way's solve of the complete
 hidden it measures how much the bones' lengths wander. The fit calibrates from the same hidden take, as
 ``mocap solve --fit`` does; ``fit_subject`` is the studio's order, the subject calibrated first with every
 marker seen (here: from the complete take, standing in for a range-of-motion take) and then fitted to the
-hidden take, as ``mocap calibrate`` then ``mocap solve --subject`` do.
+hidden take, as ``mocap calibrate`` then ``mocap solve --fit --subject`` do; ``studio_subject`` the studio options
+with that subject's bones, as ``mocap calibrate`` then ``mocap solve --subject`` (and a graph's ``subject`` param).
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from mocap_core.profiles import Profile
 from mocap_core.recordings import Recording
 from mocap_core.skeleton import INDEX, PARENT_INDEX
 
-METHODS = ("thesis", "studio", "fit", "fit_subject")
+METHODS = ("thesis", "studio", "studio_subject", "fit", "fit_subject")
 # The studio options lean on the profile's ``tracking:`` markers; the fit finds every marker's bone by itself.
 NO_TRACKING = "studio_no_tracking"
 # What the thesis's worst case keeps (thesis 4.3): the pelvis, head, hand and toe markers.
@@ -59,13 +60,15 @@ def cases(profile: Profile, labels: list[str], start: int) -> list[Case]:
 
 def solve(method: str, markers: np.ndarray, rec: Recording, profile: Profile, subject: Subject | None = None):
     """(positions (F, J, 3), status (F, J), residual RMS per frame or None) of one method; ``subject``: the
-    calibrated subject that ``fit_subject`` fits."""
+    calibrated subject that ``fit_subject`` fits and whose bones ``studio_subject``'s rigid chains keep."""
     if method.startswith("fit"):
         chunk, residual, _ = fit_take(markers, rec.labels, profile, rec.rate_hz, subject)
         return chunk.positions, chunk.status, residual
     if method == NO_TRACKING:
         method, profile = "studio", profile.model_copy(update={"tracking": {}})
-    pipe = SkeletonPipeline(profile, rec.labels, options=method, rate_hz=rec.rate_hz)
+    pipe = SkeletonPipeline(profile, rec.labels, options=method.removesuffix("_subject"), rate_hz=rec.rate_hz)
+    if subject is not None:
+        pipe.use(subject)
     chunks = list(pipe.run(markers))
     return np.concatenate([c.positions for c in chunks]), np.concatenate([c.status for c in chunks]), None
 
@@ -88,8 +91,8 @@ def references(rec: Recording, profile: Profile) -> Reference:
     located = localize_take(rec, profile)[0]
     studio = solve("studio", rec.positions.astype(np.float64), rec, profile)[0]
     chunk, _, subject = fit_take(rec.positions, rec.labels, profile, rec.rate_hz)
-    return Reference({"thesis": located, "studio": studio, NO_TRACKING: studio, "fit": chunk.positions,
-                      "fit_subject": chunk.positions}, subject)
+    return Reference({"thesis": located, "studio": studio, NO_TRACKING: studio, "studio_subject": studio,
+                      "fit": chunk.positions, "fit_subject": chunk.positions}, subject)
 
 
 def run_case(case: Case, rec: Recording, profile: Profile, reference: Reference):
@@ -102,10 +105,10 @@ def run_case(case: Case, rec: Recording, profile: Profile, reference: Reference)
     markers[case.start:, hide] = np.nan
     rows = []
     # with nothing hidden the subject's fit is the fit
-    methods = tuple(m for m in METHODS if case.hidden or m != "fit_subject")
+    methods = tuple(m for m in METHODS if case.hidden or not m.endswith("_subject"))
     methods += (NO_TRACKING,) if case.name.startswith("elbow") and profile.tracking else ()
     for method in methods:
-        subject = reference.subject if method == "fit_subject" else None
+        subject = reference.subject if method.endswith("_subject") else None
         pos, status, residual = solve(method, markers, rec, profile, subject)
         row = {"case": case.name, "method": method}
         lengths = bone_lengths(pos)
