@@ -9,7 +9,7 @@ frame is turned by the least rotation that points it along its new direction, so
 The subject is the calibrated one (``mocap calibrate``, or ``mocap solve``'s calibration of the whole take) or,
 until one is given, the one calibrated from the stream so far as a take's is calibrated (fit.calibration.LiveBones:
 the joints' median places in their parents' bone frames, left and right bones of one length), its medians
-re-taken one joint at a time so that every bone is new each second. Until a bone is calibrated it keeps this
+re-taken one joint at a time (a joint a frame in the first second) so that every bone is new each second. Until a bone is calibrated it keeps this
 frame's length.
 
 The fit is block coordinate descent: one bone's best direction, the others held, is the weighted mean of where the
@@ -64,8 +64,9 @@ class RigidChain(LimbFill):
         if live is not None:
             live.add(frame.skeleton)
             self.wait -= 1
-            if self.wait <= 0:
-                self.wait = self.limb.clock.frames(RETAKE_S / len(live.joints))
+            if self.wait <= 0:  # (the first second, a joint a frame: a bone first seen need not wait its turn)
+                clock = self.limb.clock
+                self.wait = 1 if live.seen < clock.frames(RETAKE_S) else clock.frames(RETAKE_S / len(live.joints))
                 if live.retake():
                     self._take(live.offsets, live.known)
 

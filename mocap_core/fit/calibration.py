@@ -151,14 +151,17 @@ class LiveBones:
         self.seen += 1
 
     def retake(self) -> bool:
-        """The next joint's median again; True when a round of all of them ended (``offsets`` then new)."""
+        """The next joint's median again; True when a round of all of them ended, or this joint is calibrated for the
+        first time (``offsets`` then new: a bone first seen need not wait for the round)."""
         k, j = self.turn, self.joints[self.turn]
         self.turn = (k + 1) % len(self.joints)
         column = self.local[:self.kept, k]
         ok = np.isfinite(column[:, 0])
+        first = False
         if ok.sum() >= self.s.min_frames:
+            first = not self.raw_known[j]
             self.raw[j], self.raw_known[j] = np.median(column[ok], axis=0), True
-        if self.turn:
+        if self.turn and not first:
             return False
         self.offsets = symmetric(self.raw, self.raw_known) if self.s.symmetric else self.raw.copy()
         self.known = self.raw_known.copy()

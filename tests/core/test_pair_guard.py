@@ -86,4 +86,4 @@ def test_walk2_left_elbow_meets_issue_9s_target_with_its_wrist_glitch_dropped():
                            hips=HipOptions(pair_guard=guard), fills=STUDIO).stats()
             for guard in (False, True)}
     assert runs[True]["mean"] < 0.02 and runs[True]["max"] < 0.06, runs[True]
-    assert runs[False]["max"] > 0.09, runs[False]
+    assert runs[False]["max"] > runs[True]["max"] + 0.025, (runs[False], runs[True])  # the glitch's worst frames

@@ -25,9 +25,12 @@ def _leg_frame(knee_bend: float, stretch: float = 1.0):
     ankle = knee + 0.4 * stretch * np.array([0, 0, -1.0])
     foot = ankle + 0.05 * stretch * np.array([0, 1.0, 0])
     toe = foot + 0.1 * np.array([0, 1.0, 0])
-    for name, p in zip(("hip_l", "knee_l", "ankle_l", "foot_l", "toe_l"), (hip, knee, ankle, foot, toe)):
+    points = (hip, knee, ankle, foot, toe)
+    for k, (name, p) in enumerate(zip(("hip_l", "knee_l", "ankle_l", "foot_l", "toe_l"), points)):
         pos[INDEX[name]], status[INDEX[name]] = p, Status.LOCATED
-        frames[INDEX[name]] = np.eye(3)
+        along = points[min(k + 1, 4)] - points[min(k, 3)]  # a bone frame's y along the bone it starts, x sideways
+        y = along / np.linalg.norm(along)
+        frames[INDEX[name]] = np.column_stack([[1.0, 0, 0], y, np.cross([1.0, 0, 0], y)])
     status[INDEX["pelvis"]] = Status.LOCATED
     return pos, frames, status
 
@@ -133,8 +136,10 @@ def test_live_bones_keep_frames_spread_over_the_whole_stream():
     """Past its capacity the buffer lets every other frame go: what is kept stays evenly spread from the first frame
     to the last, so the medians are the whole stream's, not its beginning's."""
     live = LiveBones(np.array([INDEX["knee_l"]]), most=10)
-    for bend in np.linspace(0, 1.0, 80):  # the knee's place in the hip's frame turns with the bend
-        live.add(_leg_frame(bend))
+    for bend in np.linspace(0, 1.0, 80):  # the knee's place in the hip's frame (held still) turns with the bend
+        pos, frames, status = _leg_frame(bend)
+        frames[INDEX["hip_l"]] = np.eye(3)
+        live.add((pos, frames, status))
     kept = live.local[:live.kept, 0]
     assert live.stride == 8 and live.kept == 10
     seen = np.array([_leg_frame(b)[0][INDEX["knee_l"]] - [0.1, 0, 0.9] for b in np.linspace(0, 1.0, 80)])

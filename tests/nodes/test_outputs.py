@@ -61,6 +61,60 @@ def test_vmc_stream_reproduces_the_solved_skeleton(tmp_path):
             assert cos > np.cos(np.radians(3)), (sk.header.frame, bone, np.degrees(np.arccos(min(1, cos))))
 
 
+def test_vmc_animates_every_bone_of_a_set_with_one_marker_a_wrist_and_no_head(tmp_path):
+    """One marker at each wrist, none on the head: the forearms and hands still aim where the solve puts them, the
+    neck and head turn with the body, every rotation sent is finite and VMC says it is tracking."""
+    import yaml
+
+    from mocap_core.profiles import load_profile
+    from mocap_core.recordings import read_recording, write_c3d
+
+    rec = read_recording(data_file(TAKE))
+    drop = {"L_UHE", "R_UHE", "L_HDF", "L_HDB", "R_HDF", "R_HDB"}
+    keep = [i for i, x in enumerate(rec.labels) if x not in drop]
+    take = tmp_path / "one_wrist_marker_no_head.c3d"
+    write_c3d(type(rec)([rec.labels[i] for i in keep], rec.positions[:200, keep], rec.rate_hz, rec.source), take)
+    shipped = load_profile("qualisys_sports")
+    profile = tmp_path / "stripped.yaml"
+    profile.write_text(yaml.safe_dump({"name": "stripped", "up_axis": "z", "tracking": shipped.tracking, "landmarks": {
+        k: v for k, v in shipped.landmarks.items() if k not in ("L_USP", "R_USP", "SGL", "L_HEAD", "R_HEAD")}}))
+    vmc = VmcReceiver()
+    bag = tmp_path / "rig.mcap"
+    extra = f"""  - {{id: vmc, kind: vmc_output, params: {{port: {vmc.port}}}}}
+  - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [skeleton/solved]}}}}"""
+    graph = pipeline_graph(f"{{path: {take}}}", profile=str(profile), extra=extra, retarget="{bone_positions: actor}")
+    try:
+        with launched(tmp_path, graph, "--until-done") as g:
+            g.proc.wait(timeout=120)
+            assert g.proc.returncode == 0, g.log()
+        wait_for(lambda: len(vmc.complete()) >= 200, 10, "the receiver to handle what its buffer holds")
+    finally:
+        vmc.close()
+    frames = vmc.complete()
+    solved = sorted((decode(x.data, x.topic) for x in read_bag(bag, ["skeleton/solved"])), key=lambda m: m.header.frame)
+    assert len(frames) == len(solved) == 200
+    settle = int(rec.rate_hz / 2)  # (the head follows the neck once the stream has calibrated it)
+    assert all(f["OK"][3] == 1 for f in frames[settle:])  # tracking: nothing held
+    heads = []
+    for k, (received, sk) in enumerate(zip(frames, solved)):
+        if k >= settle:
+            assert (sk.status[BONE_JOINT] != Status.MISSING).all(), [b for b, s in zip(BONES, sk.status[BONE_JOINT])
+                                                                      if not s]
+        pos, world = forward_kinematics(received)
+        assert np.isfinite(world).all()
+        want = to_unity_position(sk.positions[BONE_JOINT].astype(float), sk.header.up_axis)
+        ok = sk.status[BONE_JOINT] != Status.MISSING
+        assert np.abs(pos[ok] - want[ok]).max() < 0.005, f"frame {sk.header.frame}"
+        for bone, child in (("LeftLowerArm", "LeftHand"), ("RightLowerArm", "RightHand")):
+            b, c = BONES.index(bone), BONES.index(child)
+            d = want[c] - want[b]
+            rest = np.array([-1.0 if bone.startswith("Left") else 1.0, 0, 0])
+            cos = (world[b] @ rest) @ (d / np.linalg.norm(d))
+            assert cos > np.cos(np.radians(3)), (sk.header.frame, bone, np.degrees(np.arccos(min(1, cos))))
+        heads.append(world[BONES.index("Head")])
+    assert np.ptp(np.array(heads), axis=0).max() > 0.02  # the head turns with the body, not held still
+
+
 def test_bvh_read_back_by_bvhio_is_a_t_posed_rigid_rig_that_follows_the_solve(tmp_path):
     import bvhio
 
