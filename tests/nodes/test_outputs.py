@@ -24,14 +24,14 @@ TAKE = "02_qualisys_walking_ezc3d_Qualisys.c3d"
 ARTIFACTS = REPO / "artifacts"
 
 
-def test_vmc_stream_reproduces_the_solved_skeleton(tmp_path):
-    """With the actor's bone positions, a receiver's forward kinematics gives back the solved joints."""
+def _vmc_session(tmp_path, source: str, profile: str = "qualisys_sports"):
+    """The graph on 200 frames of ``source`` with the actor's bone positions, its VMC received by a real OSC server
+    and skeleton/solved recorded: (the receiver, its frames, the solved skeletons in frame order)."""
     vmc = VmcReceiver()
     bag = tmp_path / "rig.mcap"
     extra = f"""  - {{id: vmc, kind: vmc_output, params: {{port: {vmc.port}}}}}
   - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [skeleton/solved]}}}}"""
-    graph = pipeline_graph(f"{{path: {data_file(TAKE)}, max_frames: 200}}", extra=extra,
-                           retarget="{bone_positions: actor}")
+    graph = pipeline_graph(source, profile=profile, extra=extra, retarget="{bone_positions: actor}")
     try:
         with launched(tmp_path, graph, "--until-done") as g:
             g.proc.wait(timeout=120)
@@ -39,11 +39,15 @@ def test_vmc_stream_reproduces_the_solved_skeleton(tmp_path):
         wait_for(lambda: len(vmc.complete()) >= 200, 10, "the receiver to handle what its buffer holds")
     finally:
         vmc.close()
-    frames = vmc.complete()
-    assert len(frames) == 200 and max(vmc.sizes) <= 1472  # one Ethernet frame's UDP payload each
-    assert all(f["OK"] == (1, 3, 0, 1) or f["OK"] == (1, 3, 0, 0) for f in frames)  # VMC v2.5 fields
     solved = sorted((decode(x.data, x.topic) for x in read_bag(bag, ["skeleton/solved"])), key=lambda m: m.header.frame)
-    assert len(solved) == 200
+    return vmc, vmc.complete(), solved
+
+
+def test_vmc_stream_reproduces_the_solved_skeleton(tmp_path):
+    """With the actor's bone positions, a receiver's forward kinematics gives back the solved joints."""
+    vmc, frames, solved = _vmc_session(tmp_path, f"{{path: {data_file(TAKE)}, max_frames: 200}}")
+    assert len(frames) == len(solved) == 200 and max(vmc.sizes) <= 1472  # one Ethernet frame's UDP payload each
+    assert all(f["OK"] == (1, 3, 0, 1) or f["OK"] == (1, 3, 0, 0) for f in frames)  # VMC v2.5 fields
     for received, sk in zip(frames, solved):
         for bone in BONES:
             np.testing.assert_allclose(np.linalg.norm(received["bones"][bone][1]), 1.0, atol=1e-5)
@@ -78,20 +82,7 @@ def test_vmc_animates_every_bone_of_a_set_with_one_marker_a_wrist_and_no_head(tm
     profile = tmp_path / "stripped.yaml"
     profile.write_text(yaml.safe_dump({"name": "stripped", "up_axis": "z", "tracking": shipped.tracking, "landmarks": {
         k: v for k, v in shipped.landmarks.items() if k not in ("L_USP", "R_USP", "SGL", "L_HEAD", "R_HEAD")}}))
-    vmc = VmcReceiver()
-    bag = tmp_path / "rig.mcap"
-    extra = f"""  - {{id: vmc, kind: vmc_output, params: {{port: {vmc.port}}}}}
-  - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [skeleton/solved]}}}}"""
-    graph = pipeline_graph(f"{{path: {take}}}", profile=str(profile), extra=extra, retarget="{bone_positions: actor}")
-    try:
-        with launched(tmp_path, graph, "--until-done") as g:
-            g.proc.wait(timeout=120)
-            assert g.proc.returncode == 0, g.log()
-        wait_for(lambda: len(vmc.complete()) >= 200, 10, "the receiver to handle what its buffer holds")
-    finally:
-        vmc.close()
-    frames = vmc.complete()
-    solved = sorted((decode(x.data, x.topic) for x in read_bag(bag, ["skeleton/solved"])), key=lambda m: m.header.frame)
+    _, frames, solved = _vmc_session(tmp_path, f"{{path: {take}}}", str(profile))
     assert len(frames) == len(solved) == 200
     settle = int(rec.rate_hz / 2)  # (the head follows the neck once the stream has calibrated it)
     assert all(f["OK"][3] == 1 for f in frames[settle:])  # tracking: nothing held
