@@ -57,6 +57,13 @@ NAMES: dict[str, tuple[tuple[str, ...], ...]] = {
             ("FOREFOOT", "OUT")),
 }
 MIDLINE = {"SACR", "TV12", "TV2", "SME", "SGL"}
+# Landmarks a convention marks with a pair of markers around them, found as their mean ("{s}": each side in turn):
+# (landmark, (stem, side) of each marker, what they are)
+PAIR_MEANS = (("SACR", ("IPS", "L"), ("IPS", "R"), "the two posterior iliac spines"),
+              ("SGL", ("HDF", "L"), ("HDF", "R"), "the two front head markers"),
+              ("{s}_HEAD", ("HDF", "{s}"), ("HDB", "{s}"), "the front and back head markers on that side"),
+              ("{s}_SAE", ("SHF", "{s}"), ("SHB", "{s}"), "the front and back shoulder markers on that side"),
+              ("{s}_FM2", ("FM1", "{s}"), ("FM5", "{s}"), "the 1st and 5th metatarsal markers"))
 _SIDE_WORDS = {"L": "L", "LEFT": "L", "LT": "L", "R": "R", "RIGHT": "R", "RT": "R"}
 _ALL_NAMES = {n for names in NAMES.values() for name in names for n in name}
 
@@ -124,23 +131,12 @@ def _draft(parsed: list[Label]) -> tuple[dict[str, str], dict[str, str], list[st
         hit = _find(parsed, stem, side)
         if hit:
             got[landmark], why[landmark] = hit[0], f"{hit[0]}: named {' '.join(hit[1]).lower()}"
-    # landmarks a convention marks with a pair around them
-    if "SACR" not in got and one("IPS", "L") and one("IPS", "R"):
-        got["SACR"] = f"mean({one('IPS', 'L')}, {one('IPS', 'R')})"
-        why["SACR"] = "the mean of the two posterior iliac spines"
-    if "SGL" not in got and one("HDF", "L") and one("HDF", "R"):
-        got["SGL"] = f"mean({one('HDF', 'L')}, {one('HDF', 'R')})"
-        why["SGL"] = "the mean of the two front head markers"
-    for side in "LR":
-        if f"{side}_HEAD" not in got and one("HDF", side) and one("HDB", side):
-            got[f"{side}_HEAD"] = f"mean({one('HDF', side)}, {one('HDB', side)})"
-            why[f"{side}_HEAD"] = "the mean of the front and back head markers on that side"
-        if f"{side}_SAE" not in got and one("SHF", side) and one("SHB", side):
-            got[f"{side}_SAE"] = f"mean({one('SHF', side)}, {one('SHB', side)})"
-            why[f"{side}_SAE"] = "the mean of the front and back shoulder markers on that side"
-        if f"{side}_FM2" not in got and one("FM1", side) and one("FM5", side):
-            got[f"{side}_FM2"] = f"mean({one('FM1', side)}, {one('FM5', side)})"
-            why[f"{side}_FM2"] = "the mean of the 1st and 5th metatarsal markers"
+    for target, (stem_a, side_a), (stem_b, side_b), what in PAIR_MEANS:
+        for side in ("L", "R") if "{s}" in target else ("",):
+            landmark = target.format(s=side)
+            a, b = one(stem_a, side_a.format(s=side)), one(stem_b, side_b.format(s=side))
+            if landmark not in got and a and b:
+                got[landmark], why[landmark] = f"mean({a}, {b})", f"the mean of {what}"
     # one ulna marker beside a radius marker is the wrist's, else it is the elbow's point
     for side in "LR":
         if got.get(f"{side}_USP") and re.fullmatch(r"(?i).*ulna", got[f"{side}_USP"]) and f"{side}_RSP" not in got:

@@ -9,8 +9,8 @@ frame is turned by the least rotation that points it along its new direction, so
 The subject is the calibrated one (``mocap calibrate``, or ``mocap solve``'s calibration of the whole take) or,
 until one is given, the one calibrated from the stream so far as a take's is calibrated (fit.calibration.LiveBones:
 the joints' median places in their parents' bone frames, left and right bones of one length), its medians
-re-taken one joint at a time (a joint a frame in the first second) so that every bone is new each second. Until a bone is calibrated it keeps this
-frame's length.
+re-taken one joint at a time (a joint a frame in the first second) so that every bone is new each second. Until a
+bone is calibrated it keeps this frame's length.
 
 The fit is block coordinate descent: one bone's best direction, the others held, is the weighted mean of where the
 joints after it want it (exact for that bone); a few sweeps down the chain settle a limb of four or five bones.

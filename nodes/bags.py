@@ -94,7 +94,9 @@ class BagWriter:
             self.channels[key] = self.writer.register_channel(topic, "msgpack", self.schemas[schema])
         return self.channels[key]
 
-    def write(self, topic: str, payload: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+    def write(self, topic: str, payload: bytes, log_time_ns: int, publish_time_ns: float | None = None) -> None:
+        """``publish_time_ns``: the frame's capture time, say; None: its entry time; one MCAP cannot hold (negative,
+        not finite): the log time."""
         head = peek_schema(payload)
         schema = head[0] if head else "unknown"
         if publish_time_ns is None:
@@ -104,8 +106,7 @@ class BagWriter:
                     publish_time_ns = decode(payload, topic).header.entry_time_ns or log_time_ns
                 except Exception:
                     pass
-        if not 0 <= publish_time_ns < 2 ** 64:  # (a capture time before zero: MCAP's times are unsigned)
-            publish_time_ns = log_time_ns
+        publish_time_ns = int(publish_time_ns) if 0 <= publish_time_ns < 2 ** 64 else log_time_ns  # (unsigned)
         cid = self._channel(topic, schema)
         seq = self.sequence.get(cid, 0) + 1
         self.sequence[cid] = seq

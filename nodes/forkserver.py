@@ -14,7 +14,6 @@ from __future__ import annotations
 import multiprocessing
 import multiprocessing.forkserver
 import os
-import sys
 
 _CONTEXT = multiprocessing.get_context("forkserver")
 _ENV = "MOCAP_FORKSERVER_PRELOAD"   # kinds;kernels, read by the parent as it starts
@@ -54,7 +53,3 @@ def preloaded_parts() -> tuple[list[str], tuple[str, ...]]:
     """(kinds, kernel parts) the parent was asked to load."""
     kinds, _, kernels = os.environ.get(_ENV, ";").partition(";")
     return [k for k in kinds.split(",") if k], tuple(k for k in kernels.split(",") if k)
-
-
-if __name__ == "__main__":
-    sys.exit("nodes.forkserver is used by `mocap launch`; run a node with `python -m nodes.run SPEC`")

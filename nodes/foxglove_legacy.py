@@ -16,6 +16,14 @@ LEGACY = "foxglove.websocket.v1"
 CURRENT = "foxglove.sdk.v1"
 
 
+def legacy_port(port: int, legacy: int | None) -> int | None:
+    """Where the relay listens, for a server on ``port`` and a ``legacy_port`` param: that port, or (-1) the port
+    after the server's (any free one where the server takes any, 0); None: no relay."""
+    if legacy is None or legacy >= 0:
+        return legacy
+    return port + 1 if port else 0
+
+
 class LegacyRelay:
     """Serves ``LEGACY`` clients on ``host:port`` (0: any free port; ``port`` says which once started), each relayed
     to the SDK's server at ``upstream`` (ws://HOST:PORT)."""

@@ -11,6 +11,7 @@ import foxglove
 from pydantic import BaseModel, ConfigDict, Field
 
 from messages import MarkerFrame, SkeletonFrame
+from nodes.foxglove_legacy import LegacyRelay, legacy_port
 from nodes.foxglove_scene import Channels
 from nodes.actor_split import actor_in, skeletons_of
 from nodes.runtime import Node
@@ -48,10 +49,8 @@ class FoxgloveOutput(Node):
         self.log.info("Foxglove WebSocket at ws://%s:%d", self.params.host, self.server.port)
         self.legacy = None
         p = self.params
-        if p.legacy_port is not None:
-            from nodes.foxglove_legacy import LegacyRelay
-
-            port = p.legacy_port if p.legacy_port >= 0 else (p.port + 1 if p.port else 0)
+        port = legacy_port(p.port, p.legacy_port)
+        if port is not None:
             upstream = "127.0.0.1" if p.host in ("0.0.0.0", "", "::") else p.host
             self.legacy = LegacyRelay(p.host, port, f"ws://{upstream}:{self.server.port}", self.log)
             self.legacy.start()

@@ -9,7 +9,6 @@ every piece (nodes/bags.py).
 """
 from __future__ import annotations
 
-import math
 import platform
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -58,9 +57,7 @@ class Recorder(Node):
         raise AssertionError("the recorder stores raw bytes; see on_raw")
 
     def on_raw(self, wire_topic: str, payload: bytes, msg: Message) -> None:
-        capture_ns = msg.header.capture_time_s * 1e9
-        self.bag.write(wire_topic, payload, self.ctx.received_ns,
-                       int(capture_ns) if math.isfinite(capture_ns) else self.ctx.received_ns)
+        self.bag.write(wire_topic, payload, self.ctx.received_ns, msg.header.capture_time_s * 1e9)
         if msg.SCHEMA == "mocap.MarkerSet":
             self.marker_set = msg
 

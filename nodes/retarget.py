@@ -87,7 +87,8 @@ class Retarget(Node):
             offsets = default_rig_offsets()
         else:
             offsets = np.nan_to_num(local_positions(j.positions, world, up))
-        held = np.isin(j.status[BONE_JOINT], (Status.HELD, Status.MISSING)) | unknown  # (estimated: from this frame)
+        status = j.status[BONE_JOINT]
+        held = (status == Status.HELD) | (status == Status.MISSING) | unknown  # (estimated: from this frame's data)
         self.ctx.publish("rig/pose", RigPose(
             header=RigPose.make_header(), rig=self.params.rig, bones=list(BONES),
             root_position=np.nan_to_num(to_unity_position(j.positions[0], up)).astype(np.float32),

@@ -93,8 +93,16 @@ def joint_offsets(P: np.ndarray, R: np.ndarray, s: CalibrationSettings):
         if len(turns):
             u, _, vt = np.linalg.svd(turns.mean(axis=0))
             rest[j] = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    offsets, known = finished(offsets, known, s)
+    return offsets, known, rest
+
+
+def finished(offsets: np.ndarray, known: np.ndarray, s: CalibrationSettings) -> tuple[np.ndarray, np.ndarray]:
+    """The joints' offsets as a calibration gives them (new arrays): left and right bones of one length (with
+    ``s.symmetric``), a head on the neck where no marker located it."""
+    offsets, known = (symmetric(offsets, known) if s.symmetric else offsets.copy()), known.copy()
     default_head(offsets, known)
-    return (symmetric(offsets, known) if s.symmetric else offsets), known, rest
+    return offsets, known
 
 
 def default_head(offsets: np.ndarray, known: np.ndarray) -> None:
@@ -163,9 +171,7 @@ class LiveBones:
             self.raw[j], self.raw_known[j] = np.median(column[ok], axis=0), True
         if self.turn and not first:
             return False
-        self.offsets = symmetric(self.raw, self.raw_known) if self.s.symmetric else self.raw.copy()
-        self.known = self.raw_known.copy()
-        default_head(self.offsets, self.known)
+        self.offsets, self.known = finished(self.raw, self.raw_known, self.s)
         return True
 
 
