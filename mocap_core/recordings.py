@@ -74,6 +74,7 @@ def read_c3d(path: Path) -> Recording:
     """ezc3d reads it in a forked child: some corrupt files crash ezc3d (a segfault would take the caller with it)
     or make it loop; the child's death or a timeout becomes a RecordingError naming the file. (os.fork, not
     multiprocessing: it works in daemonic processes too, a Dask worker's say.)"""
+    import faulthandler
     import os
     import pickle
     import select
@@ -84,6 +85,7 @@ def read_c3d(path: Path) -> Recording:
     pid = os.fork()
     if pid == 0:  # the child: read, send the result (or the error) back, and leave without cleaning up
         os.close(read_end)
+        faulthandler.disable()  # a crash here is the parent's to report, without a dump of the caller's stack
         try:
             payload = ("ok", _read_c3d(path))
         except RecordingError as e:

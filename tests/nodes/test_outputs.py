@@ -24,14 +24,16 @@ TAKE = "02_qualisys_walking_ezc3d_Qualisys.c3d"
 ARTIFACTS = REPO / "artifacts"
 
 
-def _vmc_session(tmp_path, source: str, profile: str = "qualisys_sports"):
-    """The graph on 200 frames of ``source`` with the actor's bone positions, its VMC received by a real OSC server
-    and skeleton/solved recorded: (the receiver, its frames, the solved skeletons in frame order)."""
+def _vmc_session(tmp_path, take, profile: str = "qualisys_sports"):
+    """The graph on the first 200 frames of ``take`` with the actor's bone positions, its VMC received by a real OSC
+    server and skeleton/solved recorded: (the receiver, its frames, the solved skeletons in frame order). The source
+    waits for each frame's skeleton and retarget for every limb, so a busy machine holds no limb."""
     vmc = VmcReceiver()
     bag = tmp_path / "rig.mcap"
     extra = f"""  - {{id: vmc, kind: vmc_output, params: {{port: {vmc.port}}}}}
   - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [skeleton/solved]}}}}"""
-    graph = pipeline_graph(source, profile=profile, extra=extra, retarget="{bone_positions: actor}")
+    source = f"{{path: {take}, max_frames: 200, lockstep_topic: skeleton/solved, lockstep_timeout_s: 30}}"
+    graph = pipeline_graph(source, profile=profile, extra=extra, retarget="{bone_positions: actor, max_wait_ms: 5000}")
     try:
         with launched(tmp_path, graph, "--until-done") as g:
             g.proc.wait(timeout=120)
@@ -45,7 +47,7 @@ def _vmc_session(tmp_path, source: str, profile: str = "qualisys_sports"):
 
 def test_vmc_stream_reproduces_the_solved_skeleton(tmp_path):
     """With the actor's bone positions, a receiver's forward kinematics gives back the solved joints."""
-    vmc, frames, solved = _vmc_session(tmp_path, f"{{path: {data_file(TAKE)}, max_frames: 200}}")
+    vmc, frames, solved = _vmc_session(tmp_path, data_file(TAKE))
     assert len(frames) == len(solved) == 200 and max(vmc.sizes) <= 1472  # one Ethernet frame's UDP payload each
     assert all(f["OK"] == (1, 3, 0, 1) or f["OK"] == (1, 3, 0, 0) for f in frames)  # VMC v2.5 fields
     for received, sk in zip(frames, solved):
@@ -82,7 +84,7 @@ def test_vmc_animates_every_bone_of_a_set_with_one_marker_a_wrist_and_no_head(tm
     profile = tmp_path / "stripped.yaml"
     profile.write_text(yaml.safe_dump({"name": "stripped", "up_axis": "z", "tracking": shipped.tracking, "landmarks": {
         k: v for k, v in shipped.landmarks.items() if k not in ("L_USP", "R_USP", "SGL", "L_HEAD", "R_HEAD")}}))
-    _, frames, solved = _vmc_session(tmp_path, f"{{path: {take}}}", str(profile))
+    _, frames, solved = _vmc_session(tmp_path, take, str(profile))
     assert len(frames) == len(solved) == 200
     settle = int(rec.rate_hz / 2)  # (the head follows the neck once the stream has calibrated it)
     assert all(f["OK"][3] == 1 for f in frames[settle:])  # tracking: nothing held
