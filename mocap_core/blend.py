@@ -8,7 +8,8 @@ With a half-life (blend_half_life_s) the output is the source (markers, or a fil
 the markers are lost or come back, the offset takes in the jump: the new source less where the old one was heading
 (its last position plus its own last step), so the output goes on as it went. The offset then dies out as a
 critically damped spring (Holden's, exact for any ``dt``), by at most ``step`` a frame when that is set (or
-PACE_SHARE of the source's own step, if more). At loss the offset is the truth the estimate has not got: over a
+PACE_SHARE of the source's own step, if more; an offset too large for that cap to close within MEET_S is left to
+the spring alone). At loss the offset is the truth the estimate has not got: over a
 short gap it keeps the joint near its markers' last course. After a loss the output also stays on that course (the
 markers' last step, on and on), leaving it for the fill as course_weight says, which learns from the joint how fast
 its markers turn and how far its fill missed them where they came back (``trust``); ``step`` caps that too. Markers
@@ -72,10 +73,15 @@ COURSE_K = 3.0
 HOLD_COURSE_S = 0.05
 ACCEL_FLOOR = 1.0       # m/s^2
 FILL_SD_PRIOR = 0.01    # metres
+MISS_SIGMAS = 3.0       # a miss counts at most this many RMS misses so far (winsorized: robust to a glitch)
 # reacquire_step_m caps how far the blend moves the output off its source in a frame; a source moving over
 # four times that may be left or met at a quarter of its own step, so a fast joint (a kicking foot) does not
 # fall behind its fill and take long to meet its markers again.
 PACE_SHARE = 0.25
+# An offset the step cap could not close within this many seconds is left to the spring alone: a source that jumped
+# far and back (frames replayed, a marker swapped for a moment) leaves no trace half a second on, where the cap
+# would take seconds.
+MEET_S = 0.4
 EASED = 0.999           # the weight at which the fill is taken whole
 # While a fill stands in for the markers, the output stays within this of it: the markers' course runs on
 # straight at their last step, and a hand lost in a fast strike would otherwise fly far off its held fill, with
@@ -108,6 +114,7 @@ class BlendMemory(NamedTuple):
     course_len: np.ndarray    # (n, 2) a lone joint's distances to its two neighbours where its course began
     held_course: np.ndarray   # (n,) bool: that course began where an estimate was given up for a hold
     course_base: np.ndarray   # (n, 3) the parent's step that course_step moves with (parent alone located)
+    offset_size: np.ndarray   # (n,) the offset's size where the source last changed (MEET_S)
 
 
 class BlendSettings(NamedTuple):
@@ -153,7 +160,7 @@ class BlendState:
                              np.zeros((n, 2, 3)), np.full((n, 2), 1 << 30, np.int64), np.zeros(n, np.int64),
                              np.zeros(1, bool), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
                              np.full(n, np.inf), np.zeros(n), np.zeros((n, 5)), np.zeros((n, 3)), np.zeros((n, 3)),
-                             np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((n, 3)))
+                             np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((n, 3)), np.zeros(n))
         return cls(memory, np.full((n, 3, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)), step,
                    BLEND_X / half_life_s if half_life_s > 0 else 0.0, course, clock or FrameClock(DEFAULT_FRAME_S))
 
@@ -276,7 +283,8 @@ def _change(raw, heading, s, was, k, mem, dt):
         trust[k, ACC_SUM] += vnorm(raw - heading) / (dt * dt)  # |acceleration|
         trust[k, ACC_N] += 1
     if s == LOCATED and was != LOCATED and was != MISSING:  # how far the output's course missed the markers
-        miss = vnorm(raw - (heading + mem.offset[k]))
+        # at most MISS_SIGMAS of the misses so far: one glitch (frames replayed) must not set the trust for good
+        miss = min(vnorm(raw - (heading + mem.offset[k])), MISS_SIGMAS * math.sqrt(_fill_var(trust[k])))
         trust[k, MISS_SQ] += miss * miss
         trust[k, MISS_N] += 1
     back = handed and was == HELD and since_loss[k] < math.inf
@@ -340,10 +348,15 @@ def _spring_blend(p, s, was, k, mem, cfg, decay, neighbours):
         offset_vel[k] = 0.0
     if was != MISSING and (c.found_or_lost or c.jumped or c.back):
         _new_offset(raw, heading, s, was, k, mem, cfg, c)
+        mem.offset_size[k] = vnorm(offset[k])
     else:
+        if c.spike or c.handed:
+            mem.offset_size[k] = vnorm(offset[k])
         if was != MISSING and not c.handed and not c.spike:  # (a hand-over's jump is not the source's step)
             _take_step(raw_vel[k], raw - last_raw[k], last_raw[k] - prev_raw[k], SOURCE_JUMP_M_S * dt)
         limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
+        if mem.offset_size[k] * dt > limit * MEET_S:
+            limit = math.inf
         before = offset[k].copy()
         offset[k], offset_vel[k] = spring_step(before, offset_vel[k], omega, dt, decay)
         moved = vnorm(offset[k] - before)
@@ -457,8 +470,14 @@ def course_weight(t, trust):
     """How far the output has gone from the markers' course towards the fill, ``t`` seconds after a loss
     (``trust``: a joint's row of BlendState.trust)."""
     stray = COURSE_K * 0.5 * max(trust[ACC_SUM] / trust[ACC_N], ACCEL_FLOOR) * t * t
-    fill_var = (FILL_SD_PRIOR * FILL_SD_PRIOR + trust[MISS_SQ]) / (1.0 + trust[MISS_N])
+    fill_var = _fill_var(trust)
     return stray * stray / (stray * stray + fill_var)
+
+
+@njit(cache=True, inline="always")
+def _fill_var(trust):
+    """The fill's mean squared miss where the markers came back (FILL_SD_PRIOR counting as one)."""
+    return (FILL_SD_PRIOR * FILL_SD_PRIOR + trust[MISS_SQ]) / (1.0 + trust[MISS_N])
 
 
 @njit(cache=True)
@@ -490,7 +509,7 @@ def blend_transitions(positions, status, idx, memory, step, omega, dt, course_on
     parent's step that the course's step carries (BlendMemory's fields, given as a plain tuple)."""
     mem = BlendMemory(*memory)
     (last_out, out_step, last_raw, raw_vel, seen_raw, seen_age, last_status, has_last, offset, offset_vel, course,
-     course_step, since_loss, eased, trust, prev_raw, prev_vel, course_len, held_course, course_base) = memory
+     course_step, since_loss, eased, trust, prev_raw, prev_vel, course_len, held_course, course_base, _) = memory
     cfg = BlendSettings(step, omega, dt, course_on)
     n = idx.shape[0]
     decay = math.exp(-omega * dt)

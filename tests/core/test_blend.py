@@ -132,15 +132,28 @@ def test_a_step_caps_how_fast_the_offset_closes_or_half_the_joints_own_step(spee
     or left at a quarter of its own step (PACE_SHARE), so a fast one does not fall behind its fill."""
     rate_hz, step = 100.0, 0.002
     velocity = np.array([speed, 0.0, 0.0])
-    bias = lambda f: np.array([0.0, 0.3, 0.0])  # noqa: E731  (far enough for the cap to bind)
+    cap = max(step, blend.PACE_SHARE * speed / rate_hz)
+    # far enough for the cap to bind, near enough for it to close the offset within MEET_S
+    bias = lambda f: np.array([0.0, 0.9 * cap * blend.MEET_S * rate_hz, 0.0])  # noqa: E731
     out, truth = run(rate_hz, range(10, 10_000), step=step, velocity=velocity, bias=bias, frames=200)
     extra = np.linalg.norm(np.diff(out, axis=0) - np.diff(truth, axis=0), axis=1)
-    cap = max(step, blend.PACE_SHARE * speed / rate_hz)
     assert extra.max() <= cap + 1e-12
     assert extra.max() > 0.99 * cap  # (the cap binds)
     spring, _ = run(rate_hz, range(10, 10_000), velocity=velocity, bias=bias, frames=200)
     uncapped = np.linalg.norm(np.diff(spring, axis=0) - np.diff(truth, axis=0), axis=1)
     assert uncapped.max() > 1.5 * cap  # (the spring alone moves faster than the cap)
+
+
+def test_an_offset_the_step_cap_could_not_close_in_time_is_left_to_the_spring():
+    """A source far off where it changed (frames replayed, a marker swapped for a moment): the cap would take seconds,
+    the spring alone takes well under MEET_S + 0.1 s to come within 10 mm."""
+    rate_hz, step = 100.0, 0.01
+    bias = lambda f: np.array([0.0, 1.1 * step * blend.MEET_S * rate_hz, 0.0])  # noqa: E731
+    capped, truth = run(rate_hz, range(10, 10_000), step=step, bias=bias, frames=100, course=False)
+    spring, _ = run(rate_hz, range(10, 10_000), bias=bias, frames=100, course=False)
+    np.testing.assert_allclose(capped, spring, atol=1e-12)
+    settled = 10 + int((blend.MEET_S + 0.1) * rate_hz)
+    assert np.linalg.norm(capped[settled:] - truth[settled:] - bias(0), axis=1).max() < 0.01
 
 
 def test_an_estimate_that_jumps_to_another_source_mid_gap_is_met_smoothly_known_answer():
