@@ -1,6 +1,6 @@
 """Drafting a profile from the labels of marker-set conventions we do not ship: the takes of ../shared/data with
-their labels renamed by the published tables of OpenSim's, OptiTrack Motive's and Qualisys's conventions, with and
-without a subject prefix."""
+their labels renamed by the published tables of OpenSim's, OptiTrack Motive's and Qualisys's conventions, or in lower
+case as some databases store them, with and without a subject prefix."""
 import pytest
 
 from tests.conftest import data_file
@@ -29,9 +29,12 @@ QUALISYS_ANIMATION = {**MOTIVE, "C7": "SpineThoracic2", "T10": "SpineThoracic12"
 TAKES = ["08_cmu_135_02_karate_kata.c3d", "12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d"]
 
 
-def renamed(label: str, table: dict[str, str], prefix: str) -> str:
+def renamed(label: str, table: dict[str, str] | None, prefix: str) -> str:
+    """``label`` by ``table`` (None: the same names in lower case) after ``prefix``."""
     base = label.rsplit(":", 1)[-1]
-    if base in table:
+    if table is None:
+        base = base.lower()
+    elif base in table:
         base = table[base].format(s="")
     elif base[0] in "LR" and base[1:] in table:
         base = table[base[1:]].format(s=base[0])
@@ -39,7 +42,7 @@ def renamed(label: str, table: dict[str, str], prefix: str) -> str:
 
 
 @pytest.mark.parametrize("take", TAKES)
-@pytest.mark.parametrize("convention", ["opensim", "human_body", "motive", "qualisys_animation"])
+@pytest.mark.parametrize("convention", ["opensim", "human_body", "motive", "qualisys_animation", "lowercase"])
 @pytest.mark.parametrize("prefix", ["", "S01_", "J"])
 def test_a_draft_locates_what_the_shipped_profile_does(take, convention, prefix):
     """At least 90 % of the joint-frames the shipped profile locates, from the draft of the renamed labels."""
@@ -50,7 +53,7 @@ def test_a_draft_locates_what_the_shipped_profile_does(take, convention, prefix)
 
     rec = read_recording(data_file(take))
     table = {"opensim": OPENSIM, "human_body": HUMAN_BODY, "motive": MOTIVE,
-             "qualisys_animation": QUALISYS_ANIMATION}[convention]
+             "qualisys_animation": QUALISYS_ANIMATION, "lowercase": None}[convention]
     prefix = "Q_" + prefix if convention == "qualisys_animation" else prefix
     labels = [renamed(x, table, prefix) for x in rec.labels]
     landmarks, _, _ = draft(labels)
