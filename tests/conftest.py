@@ -3,12 +3,14 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import fcntl
 import json
 import os
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -188,3 +190,14 @@ def emulator(tmp_path, *args, port=0, file="12_vicon_freeform_realgaps_nimble_ni
             except subprocess.TimeoutExpired:
                 proc.kill()
         log.close()
+
+
+@pytest.fixture
+def default_ports():
+    """The README's commands bind the graphs' default ports (viewer 8090, Foxglove 8765-8766, the QTM emulator 22223):
+    a test that runs them holds this machine-wide lock, so a second test suite beside it waits rather than binds them
+    too (give such a test a timeout that covers the wait)."""
+    path = Path(tempfile.gettempdir()) / f"mocap-tests-default-ports-{os.getuid()}.lock"
+    with open(path, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield

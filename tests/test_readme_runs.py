@@ -9,6 +9,8 @@ import signal
 import subprocess
 import sys
 
+import pytest
+
 from tests.conftest import DATA, REPO, data_file, wait_for
 from tests.test_readme_commands import COMMANDS
 
@@ -99,7 +101,8 @@ def test_the_offline_commands(tmp_path):
     assert len(list((tmp_path / "solved").glob("*.bvh"))) >= 5
 
 
-def test_a_studio_session_its_tools_and_its_bags(tmp_path):
+@pytest.mark.timeout(900)
+def test_a_studio_session_its_tools_and_its_bags(tmp_path, default_ports):
     with running(STUDIO, tmp_path):
         wait_for(lambda: _serves_skeletons(tmp_path), 120, "skeletons from the studio graph")
         outputs = [run(command, tmp_path, timeout=60) for command in TOOLS]
@@ -112,7 +115,8 @@ def test_a_studio_session_its_tools_and_its_bags(tmp_path):
     assert (tmp_path / "take.fox.mcap").exists() and (tmp_path / "out.mcap").exists()
 
 
-def test_the_live_graphs(tmp_path):
+@pytest.mark.timeout(900)
+def test_the_live_graphs(tmp_path, default_ports):
     with running(QTM, tmp_path):
         for command, serves in GRAPHS:
             with running(command, tmp_path):
