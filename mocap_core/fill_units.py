@@ -85,6 +85,7 @@ class LimbFrame:
     recalled: np.ndarray      # (n, 3) per limb joint, where the limb memory would have it (NaN: no say)
     modelled: np.ndarray      # (n, 3) and where the body model puts it,
     model_weight: np.ndarray  # (n,) with this weight (the swivel reads all three)
+    markers: np.ndarray | None = None  # (M, 3) the frame's markers, where the stage has them (the rigid chain's)
     skeleton: tuple = field(init=False)  # (positions, frames, status), as the kernels take them
 
     def __post_init__(self):

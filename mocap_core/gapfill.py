@@ -102,10 +102,11 @@ class LimbFiller:
         self.limits = ChainLimits(np.eye(3), c.pp[self.joints], c.cones[self.joints], c.has_cone[self.joints],
                                   c.twists[self.joints], c.has_twist[self.joints])  # (each run's ref0 its own)
 
-    def use(self, subject) -> None:
-        """The limb's rigid chain (if on) with the bones of a calibrated subject (mocap_core.fit.subject)."""
+    def use(self, subject, labels: list[str] | None = None) -> None:
+        """The limb's rigid chain (if on) with the bones of a calibrated subject (mocap_core.fit.subject); with the
+        stream's marker ``labels``, fitted to the markers the subject places on the limb (``fill``'s ``markers``)."""
         if self.rigid is not None:
-            self.rigid.use(subject)
+            self.rigid.use(subject, labels)
 
     @property
     def rigid(self) -> RigidChain | None:
@@ -116,13 +117,15 @@ class LimbFiller:
         return next((fill for fill in self.fills if isinstance(fill, kind)), None)
 
     def fill(self, positions: np.ndarray, frames: np.ndarray, status: np.ndarray,
-             time_s: float = float("nan")) -> FillStats:
+             time_s: float = float("nan"), markers: np.ndarray | None = None) -> FillStats:
         """Fill this limb's joints of one skeleton frame in place (arrays of the whole skeleton).
-        ``time_s``: the frame's capture time, which paces the fills (else blend.DEFAULT_FRAME_S a frame)."""
+        ``time_s``: the frame's capture time, which paces the fills (else blend.DEFAULT_FRAME_S a frame);
+        ``markers``: the frame's markers (M, 3), labelled as ``use`` was told."""
         t0 = time.perf_counter()
         self.clock.advance(time_s)
         idx = self.joints
-        frame = LimbFrame(positions, frames, status, np.zeros(4), self.no_recall, self.no_model, self.no_weight)
+        frame = LimbFrame(positions, frames, status, np.zeros(4), self.no_recall, self.no_model, self.no_weight,
+                          markers)
         af.learn_lengths(positions, status, idx, self.lengths)
         for before in self._before:
             before(frame)
@@ -279,24 +282,25 @@ class GapFiller:
         self.limbs = {limb: LimbFiller(limb, solver, params, constraints, options.for_limb(limb))
                       for limb in LIMBS}  # the torso first
 
-    def use(self, subject) -> None:
-        """Every limb's rigid chain (where on) with the bones of a calibrated subject."""
+    def use(self, subject, labels: list[str] | None = None) -> None:
+        """Every limb's rigid chain (where on) with a calibrated subject's bones (and markers: LimbFiller.use)."""
         for f in self.limbs.values():
-            f.use(subject)
+            f.use(subject, labels)
 
     @property
     def rigid(self) -> bool:
         return any(f.rigid is not None for f in self.limbs.values())
 
-    def fill(self, positions, frames, status, time_s: float = float("nan")) -> dict[str, FillStats]:
+    def fill(self, positions, frames, status, time_s: float = float("nan"),
+             markers: np.ndarray | None = None) -> dict[str, FillStats]:
         """One frame in place, as the graph fills it: the torso first, then each limb from the torso's output
         (the limb nodes run side by side: none sees another's filled joints)."""
         torso, *limbs = self.limbs.values()
-        stats = {"torso": torso.fill(positions, frames, status, time_s)}
+        stats = {"torso": torso.fill(positions, frames, status, time_s, markers)}
         filled = []
         for f in limbs:
             p, r, s = positions.copy(), frames.copy(), status.copy()
-            stats[f.limb] = f.fill(p, r, s, time_s)
+            stats[f.limb] = f.fill(p, r, s, time_s, markers)
             filled.append((f.joints, p, r, s))
         for idx, p, r, s in filled:
             positions[idx], frames[idx], status[idx] = p[idx], r[idx], s[idx]

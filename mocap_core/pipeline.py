@@ -46,6 +46,7 @@ class SkeletonPipeline:
         blends (else blend.DEFAULT_FRAME_S a frame)."""
         self.frame_s = 1.0 / rate_hz if rate_hz else DEFAULT_FRAME_S
         self.landmark_map = profile.resolve(labels)
+        self.labels = list(profile.columns(labels))
         self.gate = MarkerGate()
         options = options or ("studio" if fill_gaps else "thesis")
         options = PRESETS[options] if isinstance(options, str) else options
@@ -76,14 +77,17 @@ class SkeletonPipeline:
         loc = self.localizer.localize(landmarks, rebuilt)
         pos, frames, status = loc.positions, loc.frames, loc.status
         if self.filler is not None:
+            with_markers = markers is not None and self.subject is not None
             for f in range(len(pos)):
-                self.filler.fill(pos[f], frames[f], status[f], (start + f) * self.frame_s)
+                self.filler.fill(pos[f], frames[f], status[f], (start + f) * self.frame_s,
+                                 markers[f] if with_markers else None)
         return SolvedChunk(start, pos, frames, status)
 
     def use(self, subject) -> None:
-        """Solve with a calibrated subject's bones (mocap_core.fit.subject): the rigid chains keep them."""
+        """Solve with a calibrated subject's bones (mocap_core.fit.subject): the rigid chains keep them, fitted to
+        the markers it places on them."""
         if self.filler is not None:
-            self.filler.use(subject)
+            self.filler.use(subject, self.labels if len(subject.labels) else None)
         self.subject = subject
 
     def calibrate(self, markers: np.ndarray):

@@ -14,6 +14,13 @@ bone is calibrated it keeps this frame's length.
 
 The fit is block coordinate descent: one bone's best direction, the others held, is the weighted mean of where the
 joints after it want it (exact for that bone); a few sweeps down the chain settle a limb of four or five bones.
+
+With a subject that places markers on its bones (``mocap calibrate``) and the frame's markers, the chain is fitted
+to the markers riding the limb too: the whole-body fit's solve (mocap_core.fit.kernel.fit_pose) over the limb
+alone, its first joint's parent pinned where the stage before placed it, each joint placed this frame a marker on
+its parent bone (an estimated one counting ``ESTIMATED_WEIGHT``), the bones turning from their last frame's pose as
+the fit's motion and posture tasks let them. A seen hand or toe marker then turns the hand or foot, and the joints
+above it follow, where the fills had only the joints to go by.
 """
 from __future__ import annotations
 
@@ -24,12 +31,15 @@ from numba import njit
 
 from mocap_core.analytic_fill import all_finite
 from mocap_core.fill_units import LimbFill, LimbFrame, switch
-from mocap_core.fit.calibration import LiveBones
+from mocap_core.fit.calibration import ROTATING, LiveBones
+from mocap_core.fit.fitter import FitSettings
+from mocap_core.fit.kernel import fit_pose
 from mocap_core.ik.kernels import mm, mv, rotation_between
 from mocap_core.skeleton import END_SITES, ESTIMATED, LIMBS, LOCATED, MISSING
 
 RIGID_HELP = ("beyond the thesis: each limb output as the subject's rigid chain, its bones at their calibrated (or, "
-              "until one is given, calibrated from the stream) lengths, fitted to the joints placed this frame")
+              "until one is given, calibrated from the stream) lengths, fitted to the joints placed this frame "
+              "(and to the markers a subject file places on the limb)")
 # How much an estimated or held joint counts against a located one where the chain cannot meet both.
 ESTIMATED_WEIGHT = 0.3
 SWEEPS = 4
@@ -48,12 +58,17 @@ class RigidChain(LimbFill):
         mirrored = () if limb.other is None else limb.other
         self.live: LiveBones | None = LiveBones(np.concatenate([limb.joints, mirrored]))
         self.wait = 0                                 # frames until the next joint's re-take
+        self.markers: MarkerFit | None = None
 
-    def use(self, subject) -> None:
-        """Take the bones from a calibrated subject (mocap_core.fit.subject.Subject): they stay as it has them."""
+    def use(self, subject, labels: list[str] | None = None) -> None:
+        """Take the bones from a calibrated subject (mocap_core.fit.subject.Subject): they stay as it has them. With
+        the stream's marker ``labels`` (the subject's names), the chain is fitted to the markers riding it too."""
         self.live = None
         self._take(subject.offsets, subject.known)
         self.rest[:] = subject.rest[self.limb.joints]
+        self.markers = MarkerFit(self.limb, subject, labels) if labels else None
+        if self.markers is not None and not self.markers.cols.size:  # no marker rides the limb: its joints only
+            self.markers = None
 
     def _take(self, offsets: np.ndarray, known: np.ndarray) -> None:
         idx = self.limb.joints
@@ -71,8 +86,108 @@ class RigidChain(LimbFill):
                     self._take(live.offsets, live.known)
 
     def after(self, frame: LimbFrame) -> None:
+        if self.markers is not None and frame.markers is not None and self.markers.fit(frame):
+            return
         rigid_fit(frame.skeleton, self.limb.joints, self.limb.parent_of_root, self.end_site, self.offsets,
                   self.rest)
+
+
+class MarkerFit:
+    """The limb's chain fitted to the markers that the subject places on its bones and to its joints placed this
+    frame. The fit's model of the limb: node 0 the limb's parent joint (pinned), then the limb's joints up to the
+    first the subject does not know."""
+    PIN = 1e12  # the weight that holds the parent joint where the stage before placed it
+
+    def __init__(self, limb, subject, labels: list[str], settings: FitSettings | None = None):
+        s = settings or FitSettings()
+        self.limb, self.s = limb, s
+        idx = limb.joints
+        known = subject.known[idx]
+        n = int(np.argmin(known)) if not known.all() else len(idx)
+        self.n = n
+        nodes = np.concatenate([[limb.parent_of_root], idx[:n]]).astype(np.int64)
+        self.nodes = nodes
+        self.parent = np.arange(-1, n, dtype=np.int64)
+        self.offsets = np.zeros((n + 1, 3))
+        self.offsets[1:] = subject.offsets[idx[:n]]
+        self.rotating = ROTATING[nodes].copy()
+        self.rotating[0] = True
+        self.slot = np.where(self.rotating, 3 + 3 * (np.cumsum(self.rotating) - 1), -1).astype(np.int64)
+        self.chains = np.full((n + 1, int(self.rotating.sum())), -1, np.int64)  # each node's rotating ancestors
+        for k in range(n + 1):
+            chain = [i for i in range(k, -1, -1) if self.rotating[i]]
+            self.chains[k, :len(chain)] = chain
+        self.up = np.arange(-1, int(self.slot.max()) + 2, dtype=np.int64)  # (a chain: each unknown below the last)
+        self.rest = np.tile(np.eye(3), (n + 1, 1, 1))
+        self.rest[1:] = subject.rest[idx[:n]]
+        # the stream's markers on these bones (their columns), then one place for each joint placed this frame
+        rows = subject.marker_index(labels)
+        bone = np.where(rows >= 0, subject.marker_bone[np.maximum(rows, 0)], -1)
+        local = {int(j): k + 1 for k, j in enumerate(idx[:n]) if self.rotating[k + 1]}
+        self.cols = np.array([m for m in range(len(labels)) if int(bone[m]) in local], np.int64)
+        m = len(self.cols)
+        self.x = np.full((m + n, 3), np.nan)
+        self.bone = np.empty(m + n, np.int64)
+        self.c = np.zeros((m + n, 3))
+        self.bone[:m] = [local[int(bone[k])] for k in self.cols]
+        self.c[:m] = subject.marker_offsets[rows[self.cols]]
+        self.bone[m:] = np.arange(n)          # joint k+1 rides bone k at its offset
+        self.c[m:] = self.offsets[1:]
+        self.w_full = np.full(m + n, 1 / s.marker_sigma_m ** 2)
+        self.w = self.w_full.copy()
+        self.w_rest = np.full(n + 1, 1 / s.posture_rad ** 2)
+        self.w_rest[0] = 0.0
+        self.root = np.zeros(3)
+        self.R = np.tile(np.eye(3), (n + 1, 1, 1))
+        self.L_last = None                     # the bones' last local rotations: the motion task's prediction
+        self._P = np.zeros((n + 1, 3))
+        self._weights = np.zeros(m + n)
+
+    def fit(self, frame: LimbFrame) -> bool:
+        """Fit this frame's limb in place; False where there is nothing to fit from (the parent joint unplaced)."""
+        positions, frames, status = frame.skeleton
+        base = self.nodes[0]
+        if self.n == 0 or not (all_finite(positions[base]) and all_finite(frames[base])):
+            return False
+        m = len(self.cols)
+        self.x[:m] = frame.markers[self.cols]
+        idx = self.nodes[1:]
+        self.x[m:] = positions[idx]
+        placed = status[idx] != MISSING
+        self.x[m:][~placed] = np.nan
+        located = status[idx] == LOCATED
+        # a fill's joint between located ones counts as in the chain without markers; one beyond them (a lost end,
+        # which the fills extrapolate) is left to the markers
+        between = (np.cumsum(located) > 0) & (np.cumsum(located[::-1])[::-1] > 0)
+        self.w[m:] = np.where(located, 1.0, np.where(between, ESTIMATED_WEIGHT, 0.0)) * self.w_full[m:]
+        if not np.isfinite(self.x).all(axis=1).any():
+            return False
+        self.root[:] = positions[base]
+        self.R[0] = frames[base]
+        L_pred = np.empty_like(self.R)
+        L_pred[0] = frames[base]
+        if self.L_last is None:  # the first frame: from the fills' bone frames where they placed them
+            for k in range(1, self.n + 1):
+                f = frames[self.nodes[k]]
+                self.R[k] = f if all_finite(f) else self.R[k - 1] @ self.rest[k]
+            L_pred[1:] = np.einsum("kba,kbc->kac", self.R[:-1], self.R[1:])
+            iterations, motion = self.s.start_iterations, 1e-4
+        else:
+            L_pred[1:] = self.L_last
+            for k in range(1, self.n + 1):
+                self.R[k] = self.R[k - 1] @ self.L_last[k - 1]
+            iterations, motion = self.s.max_iterations, 1.0
+        w_rot = np.full(self.n + 1, motion / (self.s.turn_rad_s * self.limb.clock.frame_s) ** 2)
+        w_rot[0] = self.PIN
+        fit_pose((self.root, self.R), (self.x, self.bone, self.c, self.w),
+                 (self.parent, self.offsets, self.slot, self.chains, self.rotating), self.up,
+                 (positions[base].copy(), L_pred, w_rot, self.PIN, self.rest, self.w_rest),
+                 self.s.robust_m, (iterations, self.s.tolerance), (self._P, self._weights))
+        self.L_last = np.einsum("kba,kbc->kac", self.R[:-1], self.R[1:])
+        positions[idx] = self._P[1:]
+        frames[idx] = self.R[1:]
+        status[idx[~placed]] = ESTIMATED
+        return True
 
 
 @njit(cache=True)

@@ -89,9 +89,11 @@ def references(rec: Recording, profile: Profile) -> Reference:
     studio options' (their rigid chains move located joints onto the subject's bones), the fit calibrated on the
     complete take for the fit."""
     located = localize_take(rec, profile)[0]
-    studio = solve("studio", rec.positions.astype(np.float64), rec, profile)[0]
+    markers = rec.positions.astype(np.float64)
+    studio = solve("studio", markers, rec, profile)[0]
     chunk, _, subject = fit_take(rec.positions, rec.labels, profile, rec.rate_hz)
-    return Reference({"thesis": located, "studio": studio, NO_TRACKING: studio, "studio_subject": studio,
+    return Reference({"thesis": located, "studio": studio, NO_TRACKING: studio,
+                      "studio_subject": solve("studio_subject", markers, rec, profile, subject)[0],
                       "fit": chunk.positions, "fit_subject": chunk.positions}, subject)
 
 

@@ -58,3 +58,45 @@ def test_solve_fit_keeps_every_bone_and_reuses_a_subject(tmp_path):
                         "--subject", str(tmp_path / "nobody.yaml"), "--joints-out", str(out)], cwd=REPO,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "mocap calibrate" in r.stderr
+
+
+def test_the_graph_fits_each_limb_to_a_subjects_markers_as_the_offline_solve_does(tmp_path):
+    """ik_gapfill nodes given a subject file read markers/raw too and fit each limb to the markers riding it: the
+    card's graph (a process per stage) outputs what the offline solve with that subject does, in the thesis's worst
+    case (from frame 60 only the pelvis, head, hand and toe markers), where the markers move the limbs."""
+    from mocap_core.fit.calibration import calibrate
+    from mocap_core.pipeline import SkeletonPipeline
+    from mocap_core.profiles import load_profile
+    from mocap_core.recordings import read_recording, write_c3d
+    from messages import decode
+    from nodes.bags import read_bag
+    from tests.conftest import pipeline_graph
+    from tests.core.test_rigid_chain import _worst_case
+
+    rec = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
+    prof = load_profile("qualisys_sports")
+    subject = calibrate(rec.positions, rec.labels, prof, rec.rate_hz)
+    subject.save(tmp_path / "actor.yaml")
+    frames = 150
+    hidden = _worst_case(rec, prof, 60)[:frames]
+    take = tmp_path / "worst.c3d"
+    write_c3d(type(rec)(rec.labels, hidden.astype(np.float32), rec.rate_hz, rec.source), take)
+    bag = tmp_path / "solved.mcap"
+    source = f"{{path: {take}, max_frames: {frames}, lockstep_topic: skeleton/solved, lockstep_timeout_s: 30}}"
+    graph = pipeline_graph(source, extra=f"  - {{id: rec, kind: recorder, params: {{path: {bag}, "
+                                         f"topics: [skeleton/solved]}}}}", retarget="{max_wait_ms: 5000}")
+    for limb in ("torso", "left_arm", "right_arm", "left_leg", "right_leg"):
+        graph = graph.replace(f"{{limb: {limb}}}", f"{{limb: {limb}, subject: {tmp_path / 'actor.yaml'}}}")
+    with launched(tmp_path, graph, "--until-done") as g:
+        g.proc.wait(timeout=180)
+        assert g.proc.returncode == 0, g.log()
+    solved = sorted((decode(x.data, x.topic) for x in read_bag(bag, ["skeleton/solved"])), key=lambda m: m.header.frame)
+    assert [m.header.frame for m in solved] == list(range(frames))
+    graph_pos = np.stack([m.positions for m in solved]).astype(np.float64)
+    offline = {}
+    for with_markers in (True, False):
+        pipe = SkeletonPipeline(prof, rec.labels, rate_hz=rec.rate_hz)
+        pipe.use(subject if with_markers else subject.__class__(**{**subject.__dict__, "labels": []}))
+        offline[with_markers] = np.concatenate([c.positions for c in pipe.run(hidden.astype(np.float64))])
+    assert np.nanmax(np.abs(graph_pos - offline[True])) < 1e-3
+    assert np.nanmax(np.abs(offline[False] - offline[True])) > 0.01  # (the markers moved the limbs)
