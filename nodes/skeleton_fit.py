@@ -4,7 +4,7 @@ It takes the place of hip_interpolation, joint_localization and the five ik_gapf
 path); retarget with ``input: whole`` turns its output into ``skeleton/solved`` and ``rig/pose``. With
 ``subject:`` it fits that calibrated actor from the first frame; without, it calibrates from the stream's first
 seconds (publishing the thesis's localization meanwhile), refines online, and writes ``save_subject`` once the
-calibration has converged.
+calibration has converged. Each calibration runs in a process of its own: no frame waits for it.
 """
 from __future__ import annotations
 
@@ -52,21 +52,26 @@ class SkeletonFit(Node):
 
     def on_message(self, topic, msg: MarkerFrame) -> None:
         if self.live is None or msg.labels != self.labels:  # the first frame, or a new marker set
+            self.teardown()
             self.labels = list(msg.labels)
             if self.params.profile == AUTO:
                 self.profile = profile_for(AUTO, self.labels, self.log)
                 self.ctx.default_up_axis = self.profile.up_axis
             self.live = LiveFit(self.profile, self.labels, self.subject, FitSettings(limits=self.params.limits),
-                                LiveSettings(first_s=self.params.first_calibration_s))
+                                LiveSettings(first_s=self.params.first_calibration_s, background=True))
         calibrations = self.live.calibrations
         out = self.live.add(msg.positions.astype(float), msg.header.capture_time_s)
         for k in np.flatnonzero(self.live.dropped):
             self.ctx.count_error("marker_jump", f"{self.labels[k]} moved faster than a body can: dropped this frame")
         if self.live.calibrations != calibrations:
-            self.log.info("calibrated the subject (%d frames)%s", self.live.subject.frames,
-                          ", converged" if self.live.converged else "")
+            self.log.info("calibrated the subject (%d frames)%s: fitted from frame %d on", self.live.subject.frames,
+                          ", converged" if self.live.converged else "", msg.header.frame)
             if self.live.converged and self.params.save_subject and not self.saved:
                 self.live.subject.save(self.params.save_subject)
                 self.saved = True
                 self.log.info("subject written to %s", self.params.save_subject)
         self.ctx.publish("skeleton/fitted", to_message(out.positions, out.frames, out.status), source=msg)
+
+    def teardown(self) -> None:
+        if self.live is not None:
+            self.live.close()

@@ -2,6 +2,8 @@
 subject file, and the thesis's worst case on a real take."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 import yaml
@@ -11,7 +13,7 @@ from mocap_core.fit.calibration import CalibrationSettings, ROTATING, joint_offs
 from mocap_core.fit.compare import bone_lengths, cases
 from mocap_core.fit.fitter import FitSettings, SkeletonFitter
 from mocap_core.fit.kernel import forward
-from mocap_core.fit.live import LiveFit
+from mocap_core.fit.live import LiveFit, LiveSettings
 from mocap_core.fit.subject import Subject, SubjectError, load_subject
 from mocap_core.fit.take import fit_take
 from mocap_core.pipeline import SkeletonPipeline
@@ -236,3 +238,27 @@ def test_live_calibration_refines_until_the_skeleton_stops_moving():
     assert np.isfinite(out.positions).all()
     lengths = np.linalg.norm(out.positions[1:] - out.positions[PARENT_INDEX[1:]], axis=1)
     assert np.allclose(lengths, live.subject.lengths()[1:])
+
+
+def test_live_calibration_in_the_background_fits_every_frame_meanwhile():
+    """With ``background`` the calibration runs in a process of its own: the frames that come while it runs are
+    fitted (the localization until the first calibration, then the subject so far), and the subject is taken up
+    at the first frame after it ends."""
+    rec = read_recording(DATA / "08_cmu_135_02_karate_kata.c3d").slice(0, 600)
+    live = LiveFit(load_profile("cmu41"), rec.labels, live=LiveSettings(first_s=1.0, background=True))
+    during = []
+    try:
+        for f in range(len(rec.positions)):
+            out = live.add(rec.positions[f].astype(float), f / rec.rate_hz)
+            if live.calibrating:
+                during.append(np.isfinite(out.positions).all(axis=1).sum())
+        deadline, f = time.monotonic() + 300, len(rec.positions) - 1
+        while live.calibrations == 0 and time.monotonic() < deadline:  # (the stream goes on: its last frame again)
+            time.sleep(0.05)
+            f += 1
+            out = live.add(rec.positions[-1].astype(float), f / rec.rate_hz)
+    finally:
+        live.close()
+    assert live.calibrations >= 1 and live.subject is not None
+    assert during and min(during) > 0  # every frame while calibrating came out with joints
+    assert np.isfinite(out.positions[live.subject.known]).all()
