@@ -142,3 +142,39 @@ def test_the_landmarks_page_is_what_profile_explain_makes():
 
     assert (REPO / "docs" / "landmarks.md").read_text() == landmarks_page(), \
         "re-make it: mocap profile explain --markdown > docs/landmarks.md"
+
+
+@pytest.mark.parametrize("convention", ["opensim", "motive"])
+def test_a_renamed_y_up_copy_solves_upright_with_no_profile(tmp_path, convention):
+    """A studio's own recording, first time: the karate take's labels renamed to another lab's convention and its
+    world turned Y up. `mocap solve` with no profile drafts one, finds the up axis from the data, locates at least
+    90 % of the joint-frames the shipped profile does, and its BVH (read back by bvhio) stands upright: the head
+    above the hips along the BVH's Y in every frame."""
+    import bvhio
+    import numpy as np
+
+    from mocap_core.joints_csv import read_joints_csv
+    from mocap_core.recordings import read_recording, write_c3d
+    from tests.core.test_profile_draft import MOTIVE, OPENSIM, renamed
+
+    rec = read_recording(data_file(KARATE)).slice(0, 600)
+    table = {"opensim": OPENSIM, "motive": MOTIVE}[convention]
+    y_up = rec.positions[..., [0, 2, 1]] * np.array([1, 1, -1], np.float32)  # (x, y, z) -> (x, z, -y): Z up -> Y up
+    take = tmp_path / f"{convention}_y_up.c3d"
+    write_c3d(type(rec)([renamed(x, table, "") for x in rec.labels], y_up, rec.rate_hz, rec.source), take)
+    shipped = tmp_path / "shipped.c3d"
+    write_c3d(rec, shipped)
+    results = {}
+    for name, path, extra in (("copy", take, []), ("shipped", shipped, ["--profile", "cmu41"])):
+        csv_path, bvh = tmp_path / f"{name}.csv", tmp_path / f"{name}.bvh"
+        r = mocap("solve", str(path), *extra, "--joints-out", str(csv_path), "--bvh-out", str(bvh))
+        assert r.returncode == 0, r.stderr
+        results[name] = (read_joints_csv(csv_path)[3], bvh, r.stderr)
+    status, bvh, log = results["copy"]
+    assert "drafted" in log.lower() and "mocap profile init" in log, log
+    assert (status != 0).sum() >= 0.9 * (results["shipped"][0] != 0).sum()
+    root = bvhio.readAsHierarchy(str(bvh))
+    layout = {j.Name: j for j, _, _ in root.layout()}
+    for f in range(0, len(status), 5):
+        root.loadPose(f, recursive=True)
+        assert layout["head"].PositionWorld.y > layout["pelvis"].PositionWorld.y + 0.3, f

@@ -16,6 +16,12 @@ from tests.test_readme_commands import COMMANDS
 
 TAKE = "08_cmu_135_02_karate_kata.c3d"
 
+WALKTHROUGH = [  # "your own recording, first time"
+    ".venv/bin/mocap check take.c3d",
+    ".venv/bin/mocap solve take.c3d --joints-out take.csv --bvh-out take.bvh",
+    ".venv/bin/mocap profile init take.c3d -o profiles/myset.yaml",
+]
+WALKTHROUGH_LIVE = ".venv/bin/mocap qtm-sim take.c3d --loop"
 OFFLINE = [  # in the README's order: the calibration before the solve that reads it
     ".venv/bin/mocap launch launch/studio.yaml --plan",
     ".venv/bin/mocap solve ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 --joints-out karate.csv",
@@ -91,7 +97,19 @@ def _serves_skeletons(tmp_path) -> bool:
 
 def test_every_readme_command_is_run_here():
     graphs = [c for c, _ in GRAPHS]
-    assert sorted(COMMANDS) == sorted(OFFLINE + [STUDIO] + TOOLS + [RECORD] + BAGS + [QTM] + graphs)
+    assert sorted(COMMANDS) == sorted(WALKTHROUGH + [WALKTHROUGH_LIVE] + OFFLINE + [STUDIO] + TOOLS + [RECORD] + BAGS
+                                      + [QTM] + graphs)
+
+
+@pytest.mark.timeout(900)
+def test_the_walkthrough(tmp_path, default_ports):
+    """From a recording to a BVH, a profile kept for editing, and the same take live through a QTM stand-in."""
+    for command in WALKTHROUGH:
+        run(command, tmp_path, timeout=600)
+    assert (tmp_path / "take.csv").exists() and (tmp_path / "take.bvh").exists()
+    assert "landmarks:" in (tmp_path / "profiles" / "myset.yaml").read_text()
+    with running(WALKTHROUGH_LIVE, tmp_path), running(".venv/bin/mocap launch launch/qtm_unity.yaml", tmp_path):
+        wait_for(lambda: _serves_skeletons(tmp_path), 120, "skeletons from the QTM stand-in's take")
 
 
 def test_the_offline_commands(tmp_path):
