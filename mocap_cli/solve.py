@@ -43,7 +43,8 @@ def add_parser(sub) -> None:
     s.add_argument("--fit", action="store_true",
                    help="fit a calibrated rigid skeleton to every marker each frame (calibrated from this take, "
                         "or from --subject); bones keep their lengths")
-    s.add_argument("--subject", help="subject file from `mocap calibrate` (implies --fit)")
+    s.add_argument("--subject", help="subject file from `mocap calibrate`: its bones and the markers on them for "
+                                     "every limb's rigid chain (or, with --fit, the subject the fit fits)")
     s.add_argument("--constraints", help="joint-limit YAML (default: the thesis's values)")
     s.add_argument("--max-iterations", type=int, default=140)
     s.add_argument("--stop-distance", type=float, default=0.01, help="IK stop distance in metres")
@@ -84,8 +85,9 @@ def solve_take(args) -> dict:
     several actors (labels "actor1:LASI", "actor2:LASI") is solved one actor at a time, each to files of its own
     (out.csv -> out.actor1.csv, out.actor2.csv)."""
     rec = read_take(args.file)
-    ensure_compiled(log, FIT_PARTS if args.fit or args.subject else
-                    pipeline_parts("thesis" if args.thesis else "studio", fill_gaps=not args.no_ik))
+    ensure_compiled(log, FIT_PARTS if args.fit else
+                    pipeline_parts("thesis" if args.thesis else "studio", fill_gaps=not args.no_ik)
+                    + (("fit",) if args.subject else ()))
     several = actors(rec.labels)
     if len(several) < 2:
         return _solve(args, rec)
@@ -120,14 +122,20 @@ def _solve(args, rec) -> dict:
                          "solve without them.")
     for line in never:
         log.warning("never located: %s", line)
-    if args.fit or args.subject:
+    if args.subject and (args.thesis or args.no_ik):
+        raise SystemExit("mocap solve: --subject gives the studio options' rigid chains or the fit their subject; "
+                         "drop --thesis/--no-ik")
+    if args.fit:
         if args.thesis or args.no_ik:
-            raise SystemExit("mocap solve: --fit/--subject is a method of its own; drop --thesis/--no-ik")
+            raise SystemExit("mocap solve: --fit is a method of its own; drop --thesis/--no-ik")
         return _write(args, rec, profile, _fitted(args, rec, profile), started)
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)
     pipe = SkeletonPipeline(profile, rec.labels, args.solver, params, load_constraints(args.constraints),
                             fill_gaps=not args.no_ik, options="thesis" if args.thesis else "studio", rate_hz=rec.rate_hz)
+    if args.subject:  # (as an ik_gapfill node's subject param)
+        from mocap_core.fit.subject import load_subject
+        pipe.use(load_subject(args.subject))
     return _write(args, rec, profile, pipe.run(rec.positions), started)
 
 

@@ -73,7 +73,7 @@ class IkGapfill(Node):
 
     @classmethod
     def kernels(cls, params):
-        return fill_parts(params)
+        return fill_parts(params) + (("fit",) if params.subject else ())  # (a subject's markers: the fit's solve)
 
     def setup(self) -> None:
         p = self.params

@@ -83,7 +83,7 @@ def test_a_take_of_several_actors_is_solved_one_actor_at_a_time(tmp_path):
         seen = np.isfinite(one).all(axis=-1)
         assert seen.mean() > 0.95 and (seen == np.isfinite(two).all(axis=-1)).all()
         assert np.allclose(two[seen] - one[seen], [3, 0, 0], atol=1e-5)   # the copy 3 m along x, solved alike
-    # a subject file each, which the fit reads back by the actor's name
+    # a subject file each, which the solve reads back by the actor's name
     r = mocap("calibrate", str(path), "-o", str(tmp_path / "actor.yaml"))
     assert r.returncode == 0, r.stderr
     r = mocap("solve", str(path), "--subject", str(tmp_path / "actor.{actor}.yaml"), "--joints-out",

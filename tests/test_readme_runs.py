@@ -31,7 +31,7 @@ OFFLINE = [  # in the README's order: the calibration before the solve that read
     ".venv/bin/mocap check take.c3d --profile cmu41",
     ".venv/bin/mocap eval gaps",
     ".venv/bin/mocap calibrate ../shared/data/08_cmu_135_02_karate_kata.c3d --profile cmu41 -o actor.yaml",
-    ".venv/bin/mocap solve take.c3d --profile cmu41 --subject actor.yaml --joints-out out.csv --bvh-out out.bvh",
+    ".venv/bin/mocap solve take.c3d --profile cmu41 --fit --subject actor.yaml --joints-out out.csv --bvh-out out.bvh",
     ".venv/bin/mocap solve take.c3d --profile cmu41 --fit --joints-out out.csv",
 ]
 STUDIO = ".venv/bin/mocap launch launch/studio.yaml"

@@ -50,7 +50,7 @@ def test_solve_fit_keeps_every_bone_and_reuses_a_subject(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "markers on a bone" in r.stderr and yaml.safe_load(subject.read_text())["profile"] == "vicon53"
     r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "solve", str(data_file(TAKE)), "--profile", "vicon53",
-                        "--subject", str(subject), "--joints-out", str(out), "--quiet"], cwd=REPO,
+                        "--fit", "--subject", str(subject), "--joints-out", str(out), "--quiet"], cwd=REPO,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     frames, _, pos, status = read_joints_csv(out)
@@ -58,7 +58,7 @@ def test_solve_fit_keeps_every_bone_and_reuses_a_subject(tmp_path):
     lengths = bone_lengths(pos)
     assert np.abs(lengths / np.median(lengths, axis=0) - 1).max() < 0.001  # float32 CSV, rigid bones
     r = subprocess.run([sys.executable, "-m", "mocap_cli.main", "solve", str(data_file(TAKE)), "--profile", "vicon53",
-                        "--subject", str(tmp_path / "nobody.yaml"), "--joints-out", str(out)], cwd=REPO,
+                        "--fit", "--subject", str(tmp_path / "nobody.yaml"), "--joints-out", str(out)], cwd=REPO,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "mocap calibrate" in r.stderr
 
