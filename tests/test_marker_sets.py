@@ -144,9 +144,11 @@ def test_the_landmarks_page_is_what_profile_explain_makes():
         "re-make it: mocap profile explain --markdown > docs/landmarks.md"
 
 
-@pytest.mark.parametrize("convention", ["opensim", "motive"])
-def test_a_renamed_y_up_copy_solves_upright_with_no_profile(tmp_path, convention):
-    """A studio's own recording, first time: the karate take's labels renamed to another lab's convention and its
+@pytest.mark.parametrize("take, shipped_profile", [(KARATE, "cmu41"),
+                                                    ("12_vicon_freeform_realgaps_nimble_nick_freeform_001.c3d", "vicon53")])
+@pytest.mark.parametrize("convention", ["opensim", "human_body", "motive", "qualisys_animation", "lowercase"])
+def test_a_renamed_y_up_copy_solves_upright_with_no_profile(tmp_path, convention, take, shipped_profile):
+    """A studio's own recording, first time: a take's labels renamed to another lab's convention and its
     world turned Y up. `mocap solve` with no profile drafts one, finds the up axis from the data, locates at least
     90 % of the joint-frames the shipped profile does, and its BVH (read back by bvhio) stands upright: the head
     above the hips along the BVH's Y in every frame."""
@@ -155,17 +157,19 @@ def test_a_renamed_y_up_copy_solves_upright_with_no_profile(tmp_path, convention
 
     from mocap_core.joints_csv import read_joints_csv
     from mocap_core.recordings import read_recording, write_c3d
-    from tests.core.test_profile_draft import MOTIVE, OPENSIM, renamed
+    from tests.core.test_profile_draft import HUMAN_BODY, MOTIVE, OPENSIM, QUALISYS_ANIMATION, renamed
 
-    rec = read_recording(data_file(KARATE)).slice(0, 600)
-    table = {"opensim": OPENSIM, "motive": MOTIVE}[convention]
+    rec = read_recording(data_file(take)).slice(0, 600)
+    table = {"opensim": OPENSIM, "human_body": HUMAN_BODY, "motive": MOTIVE, "qualisys_animation": QUALISYS_ANIMATION,
+             "lowercase": None}[convention]
+    prefix = "Q_" if convention == "qualisys_animation" else ""
     y_up = rec.positions[..., [0, 2, 1]] * np.array([1, 1, -1], np.float32)  # (x, y, z) -> (x, z, -y): Z up -> Y up
-    take = tmp_path / f"{convention}_y_up.c3d"
-    write_c3d(type(rec)([renamed(x, table, "") for x in rec.labels], y_up, rec.rate_hz, rec.source), take)
+    copy = tmp_path / f"{convention}_y_up.c3d"
+    write_c3d(type(rec)([renamed(x, table, prefix) for x in rec.labels], y_up, rec.rate_hz, rec.source), copy)
     shipped = tmp_path / "shipped.c3d"
     write_c3d(rec, shipped)
     results = {}
-    for name, path, extra in (("copy", take, []), ("shipped", shipped, ["--profile", "cmu41"])):
+    for name, path, extra in (("copy", copy, []), ("shipped", shipped, ["--profile", shipped_profile])):
         csv_path, bvh = tmp_path / f"{name}.csv", tmp_path / f"{name}.bvh"
         r = mocap("solve", str(path), *extra, "--joints-out", str(csv_path), "--bvh-out", str(bvh))
         assert r.returncode == 0, r.stderr
