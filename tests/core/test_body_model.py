@@ -289,7 +289,7 @@ def test_the_end_model_waits_as_long_with_qtm_stamps_as_with_exact_ones():
     def solve(stamp):
         pipe = SkeletonPipeline(load_profile("cmu41"), rec.labels, options="studio", rate_hz=rec.rate_hz)
         fill = pipe.filler.fill
-        pipe.filler.fill = lambda p, fr, st, t: fill(p, fr, st, stamp(t))
+        pipe.filler.fill = lambda p, fr, st, t, *markers: fill(p, fr, st, stamp(t), *markers)
         return np.concatenate([c.positions for c in pipe.run(markers)])
 
     exact = solve(lambda t: t)
