@@ -84,6 +84,7 @@ class IkGapfill(Node):
         self.gate = MarkerGate()  # (as the offline solve drops them)
         self.markers: dict[int, np.ndarray] = {}  # frame -> its markers, until its skeleton comes
         self.held: SkeletonFrame | None = None     # a skeleton that came before its markers
+        self.unmatched = 0                          # skeletons that came before any markers
         if p.subject:
             from mocap_core.fit.subject import load_subject
             self.subject = load_subject(p.subject)
@@ -98,9 +99,14 @@ class IkGapfill(Node):
         if self.held is not None:  # (its markers never came)
             self._solve(self._release())
         if self.subject is not None and msg.header.frame not in self.markers:
-            # its markers were sent before it but come by another publisher's socket: they are on their way
-            self.held = msg
-            return
+            if self.labels or self.unmatched < MARKER_FRAMES_KEPT:
+                # its markers were sent before it but come by another publisher's socket: they are on their way
+                self.unmatched += not self.labels
+                self.held = msg
+                return
+            if self.unmatched == MARKER_FRAMES_KEPT:
+                self.unmatched += 1
+                self.log.warning("no markers on markers/raw: each limb is fitted to its joints alone")
         self._solve(msg)
 
     def _release(self) -> SkeletonFrame:
@@ -129,7 +135,11 @@ class IkGapfill(Node):
         if msg.labels != self.labels:  # the first frame, or a new marker set: the subject's names for its labels
             self.labels = list(msg.labels)
             known = set(self.subject.labels)
-            self.filler.use(self.subject, [x if x in known else strip_prefix(x) for x in self.labels])
+            names = [x if x in known else strip_prefix(x) for x in self.labels]
+            self.filler.use(self.subject, names)
+            if not known.intersection(names):
+                self.log.warning("none of the stream's %d labels is a marker of the subject (%s): each limb is "
+                                 "fitted to its joints alone", len(names), self.params.subject)
             self.gate = MarkerGate()
         self.markers[msg.header.frame], _ = self.gate.filter(msg.positions, msg.header.capture_time_s)
         while len(self.markers) > MARKER_FRAMES_KEPT:  # (a stream whose skeletons stopped)
