@@ -122,12 +122,9 @@ def _solve(args, rec) -> dict:
                          "solve without them.")
     for line in never:
         log.warning("never located: %s", line)
-    if args.subject and (args.thesis or args.no_ik):
-        raise SystemExit("mocap solve: --subject gives the studio options' rigid chains or the fit their subject; "
-                         "drop --thesis/--no-ik")
+    if (args.fit or args.subject) and (args.thesis or args.no_ik):
+        raise SystemExit("mocap solve: --fit and --subject solve with a rigid skeleton; drop --thesis/--no-ik")
     if args.fit:
-        if args.thesis or args.no_ik:
-            raise SystemExit("mocap solve: --fit is a method of its own; drop --thesis/--no-ik")
         return _write(args, rec, profile, _fitted(args, rec, profile), started)
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)

@@ -32,7 +32,7 @@ from numba import njit
 from mocap_core.analytic_fill import all_finite
 from mocap_core.fill_units import LimbFill, LimbFrame, switch
 from mocap_core.fit.calibration import ROTATING, LiveBones
-from mocap_core.fit.fitter import FitSettings
+from mocap_core.fit.fitter import FitSettings, tree_of_unknowns
 from mocap_core.fit.kernel import fit_pose
 from mocap_core.ik.kernels import mm, mv, rotation_between
 from mocap_core.skeleton import END_SITES, ESTIMATED, LIMBS, LOCATED, MISSING
@@ -112,12 +112,7 @@ class MarkerFit:
         self.offsets[1:] = subject.offsets[idx[:n]]
         self.rotating = ROTATING[nodes].copy()
         self.rotating[0] = True
-        self.slot = np.where(self.rotating, 3 + 3 * (np.cumsum(self.rotating) - 1), -1).astype(np.int64)
-        self.chains = np.full((n + 1, int(self.rotating.sum())), -1, np.int64)  # each node's rotating ancestors
-        for k in range(n + 1):
-            chain = [i for i in range(k, -1, -1) if self.rotating[i]]
-            self.chains[k, :len(chain)] = chain
-        self.up = np.arange(-1, int(self.slot.max()) + 2, dtype=np.int64)  # (a chain: each unknown below the last)
+        self.slot, self.chains, self.up = tree_of_unknowns(self.parent, self.rotating)
         self.rest = np.tile(np.eye(3), (n + 1, 1, 1))
         self.rest[1:] = subject.rest[idx[:n]]
         # the stream's markers on these bones (their columns), then one place for each joint placed this frame
@@ -133,13 +128,14 @@ class MarkerFit:
         self.c[:m] = subject.marker_offsets[rows[self.cols]]
         self.bone[m:] = np.arange(n)          # joint k+1 rides bone k at its offset
         self.c[m:] = self.offsets[1:]
-        self.w_full = np.full(m + n, 1 / s.marker_sigma_m ** 2)
-        self.w = self.w_full.copy()
+        self.w_marker = 1 / s.marker_sigma_m ** 2
+        self.w = np.full(m + n, self.w_marker)
         self.w_rest = np.full(n + 1, 1 / s.posture_rad ** 2)
         self.w_rest[0] = 0.0
-        self.root = np.zeros(3)
+        self.root, self.root_pred = np.zeros(3), np.zeros(3)
         self.R = np.tile(np.eye(3), (n + 1, 1, 1))
-        self.L_last = None                     # the bones' last local rotations: the motion task's prediction
+        self.L_last = None                     # the bones' last local rotations (their rotations in their parents')
+        self.L_pred, self.w_rot = np.empty((n + 1, 3, 3)), np.empty(n + 1)  # the motion task, set each frame
         self._P = np.zeros((n + 1, 3))
         self._weights = np.zeros(m + n)
 
@@ -149,7 +145,7 @@ class MarkerFit:
         base = self.nodes[0]
         if self.n == 0 or not (all_finite(positions[base]) and all_finite(frames[base])):
             return False
-        m = len(self.cols)
+        m, L_pred = len(self.cols), self.L_pred
         self.x[:m] = frame.markers[self.cols]
         idx = self.nodes[1:]
         self.x[m:] = positions[idx]
@@ -159,29 +155,27 @@ class MarkerFit:
         # a fill's joint between located ones counts as in the chain without markers; one beyond them (a lost end,
         # which the fills extrapolate) is left to the markers
         between = (np.cumsum(located) > 0) & (np.cumsum(located[::-1])[::-1] > 0)
-        self.w[m:] = np.where(located, 1.0, np.where(between, ESTIMATED_WEIGHT, 0.0)) * self.w_full[m:]
+        self.w[m:] = np.where(located, 1.0, np.where(between, ESTIMATED_WEIGHT, 0.0)) * self.w_marker
         if not np.isfinite(self.x).all(axis=1).any():
             return False
-        self.root[:] = positions[base]
-        self.R[0] = frames[base]
-        L_pred = np.empty_like(self.R)
-        L_pred[0] = frames[base]
+        self.root[:] = self.root_pred[:] = positions[base]
+        self.R[0] = L_pred[0] = frames[base]
         if self.L_last is None:  # the first frame: from the fills' bone frames where they placed them
             for k in range(1, self.n + 1):
                 f = frames[self.nodes[k]]
                 self.R[k] = f if all_finite(f) else self.R[k - 1] @ self.rest[k]
             L_pred[1:] = np.einsum("kba,kbc->kac", self.R[:-1], self.R[1:])
-            iterations, motion = self.s.start_iterations, 1e-4
+            iterations, motion = self.s.start_iterations, 1e-4  # (a start: the motion task almost off)
         else:
             L_pred[1:] = self.L_last
             for k in range(1, self.n + 1):
                 self.R[k] = self.R[k - 1] @ self.L_last[k - 1]
             iterations, motion = self.s.max_iterations, 1.0
-        w_rot = np.full(self.n + 1, motion / (self.s.turn_rad_s * self.limb.clock.frame_s) ** 2)
-        w_rot[0] = self.PIN
+        w_rot = self.w_rot
+        w_rot[1:], w_rot[0] = motion / (self.s.turn_rad_s * self.limb.clock.frame_s) ** 2, self.PIN
         fit_pose((self.root, self.R), (self.x, self.bone, self.c, self.w),
                  (self.parent, self.offsets, self.slot, self.chains, self.rotating), self.up,
-                 (positions[base].copy(), L_pred, w_rot, self.PIN, self.rest, self.w_rest),
+                 (self.root_pred, L_pred, w_rot, self.PIN, self.rest, self.w_rest),
                  self.s.robust_m, (iterations, self.s.tolerance), (self._P, self._weights))
         self.L_last = np.einsum("kba,kbc->kac", self.R[:-1], self.R[1:])
         positions[idx] = self._P[1:]

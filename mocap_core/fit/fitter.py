@@ -48,40 +48,35 @@ class FitFrame:
     iterations: int
 
 
-def _chains() -> np.ndarray:
-    """(J, depth): each bone's rotating ancestors, itself first, padded with -1."""
+def tree_of_unknowns(parent: np.ndarray, rotating: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A model's unknowns for the fit's solve (parents first; the first node rotating): each node's ``slot`` (its
+    turn's first unknown, after the root's position; -1 for a node that turns with its parent), its ``chains``
+    (its rotating ancestors, itself first, padded with -1) and each unknown's parent unknown (``up``, -1 at the top:
+    a bone's first below its nearest rotating ancestor's last)."""
+    n = len(parent)
+    slot = np.where(rotating, 3 + 3 * (np.cumsum(rotating) - 1), -1).astype(np.int64)
     rows = []
-    for j in range(N_JOINTS):
+    for j in range(n):
         chain, k = [], j
         while k >= 0:
-            if ROTATING[k]:
+            if rotating[k]:
                 chain.append(k)
-            k = PARENT_INDEX[k]
+            k = parent[k]
         rows.append(chain)
-    out = np.full((N_JOINTS, max(map(len, rows))), -1, np.int64)
+    chains = np.full((n, max(map(len, rows))), -1, np.int64)
     for j, chain in enumerate(rows):
-        out[j, :len(chain)] = chain
-    return out
+        chains[j, :len(chain)] = chain
+    up = np.arange(-1, int(slot.max()) + 2, dtype=np.int64)  # each below the one before ...
+    for j in range(1, n):
+        if rotating[j]:
+            k = parent[j]
+            while not rotating[k]:
+                k = parent[k]
+            up[slot[j]] = slot[k] + 2  # ... but a bone's first below its parent bone's last
+    return slot, chains, up
 
 
-CHAINS = _chains()
-SLOT = np.where(ROTATING, 3 + 3 * (np.cumsum(ROTATING) - 1), -1).astype(np.int64)
-
-
-def _unknowns_up() -> np.ndarray:
-    """The fit's unknowns as a tree for its solve: the root's position (x, y, z), then each bone's turn (x, y, z)
-    below its nearest rotating ancestor's; each unknown's parent, -1 at the top."""
-    up = np.arange(-1, int(SLOT.max()) + 2, dtype=np.int64)  # each below the one before ...
-    for j in range(1, N_JOINTS):
-        if ROTATING[j]:
-            k = PARENT_INDEX[j]
-            while not ROTATING[k]:
-                k = PARENT_INDEX[k]
-            up[SLOT[j]] = SLOT[k] + 2  # ... but a bone's first below its parent bone's last
-    return up
-
-
-UP = _unknowns_up()
+SLOT, CHAINS, UP = tree_of_unknowns(PARENT_INDEX, ROTATING)
 
 
 class SkeletonFitter:

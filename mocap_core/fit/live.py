@@ -51,16 +51,15 @@ class LiveFit:
         self.gate = MarkerGate()
         self.dropped = np.zeros(len(labels), bool)
         self._pool: ProcessPoolExecutor | None = None
-        self._pending: Future | None = None  # the calibration running in the background
-        self._pending_rate = 0.0
+        self._pending: tuple[Future, float] | None = None  # the calibration running in the background, and its rate
 
     def add(self, markers: np.ndarray, time_s: float) -> FitFrame:
         """One frame's markers (M, 3) in metres at capture time ``time_s`` -> the skeleton (``self.dropped``: the
         markers of this frame that no body could have put there, dropped first)."""
         markers, self.dropped = self.gate.filter(markers, time_s)
-        if self._pending is not None and self._pending.done():
-            done, self._pending = self._pending, None
-            self._adopt(done.result(), self._pending_rate)
+        if self._pending is not None and self._pending[0].done():
+            (done, rate), self._pending = self._pending, None
+            self._adopt(done.result(), rate)
         if not self.converged:
             self._keep(markers, time_s)
             if self._times and time_s - self._times[0] >= self._next_s and self._pending is None:
@@ -107,7 +106,7 @@ class LiveFit:
             return
         if self._pool is None:  # (spawned, not forked: the node's process runs ZeroMQ's threads)
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-        self._pending, self._pending_rate = self._pool.submit(calibrate, *args), rate
+        self._pending = self._pool.submit(calibrate, *args), rate
 
     def _adopt(self, new: Subject, rate: float) -> None:
         """Fit with a new calibration from this frame on."""

@@ -77,18 +77,23 @@ def test_a_subject_sets_the_bones_from_the_first_frame():
     assert np.allclose(_lengths(pos, LEG[1:]), [0.4, 0.44, 0.055, 0.1], atol=1e-6)
 
 
+def _worst_case(rec, prof, start):
+    """The thesis's worst case: from ``start`` only the pelvis, head, hand and toe markers."""
+    kept = {m for lm in ("SACR", "L_IAS", "R_IAS", "L_IPS", "R_IPS", "SGL", "L_HEAD", "R_HEAD", "L_HM2", "R_HM2",
+                         "L_FM2", "R_FM2") if lm in prof.landmarks for m in prof.markers_of(lm)}
+    markers = rec.positions.astype(np.float64)
+    for i, label in enumerate(prof.columns(rec.labels)):
+        if label not in kept:
+            markers[start:, i] = np.nan
+    return markers
+
+
 def test_the_torso_and_limbs_are_rigid_in_the_worst_case_of_a_real_take():
     """The thesis's worst case on a real take (only the pelvis, head, hand and toe markers from 1 s): every bone at
     one length in every frame, and no joint the complete take locates left missing."""
     rec = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
     prof = load_profile("qualisys_sports")
-    kept = {m for lm in ("SACR", "L_IAS", "R_IAS", "L_IPS", "R_IPS", "SGL", "L_HEAD", "R_HEAD", "L_HM2", "R_HM2",
-                         "L_FM2", "R_FM2") if lm in prof.landmarks for m in prof.markers_of(lm)}
-    markers = rec.positions.copy()
-    start = int(rec.rate_hz)
-    for i, label in enumerate(prof.columns(rec.labels)):
-        if label not in kept:
-            markers[start:, i] = np.nan
+    markers = _worst_case(rec, prof, int(rec.rate_hz))
     pipe = SkeletonPipeline(prof, rec.labels, options="studio", rate_hz=rec.rate_hz)
     chunks = list(pipe.run(markers))
     pos = np.concatenate([c.positions for c in chunks])
@@ -213,17 +218,6 @@ def test_one_marker_a_wrist_and_no_head_markers_still_give_every_bone_turned():
     head = np.linalg.norm(pos[:, INDEX["head"]] - pos[:, INDEX["neck"]], axis=-1)
     assert 0.1 < head.min() and head.max() < 0.2
     assert (status[:, INDEX["wrist_l"]] == Status.LOCATED).mean() > 0.9
-
-
-def _worst_case(rec, prof, start):
-    """The thesis's worst case: from ``start`` only the pelvis, head, hand and toe markers."""
-    kept = {m for lm in ("SACR", "L_IAS", "R_IAS", "L_IPS", "R_IPS", "SGL", "L_HEAD", "R_HEAD", "L_HM2", "R_HM2",
-                         "L_FM2", "R_FM2") if lm in prof.landmarks for m in prof.markers_of(lm)}
-    markers = rec.positions.astype(np.float64)
-    for i, label in enumerate(prof.columns(rec.labels)):
-        if label not in kept:
-            markers[start:, i] = np.nan
-    return markers
 
 
 def test_a_subject_with_markers_fits_each_limb_to_the_markers_riding_it():
