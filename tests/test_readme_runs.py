@@ -112,6 +112,7 @@ def test_the_walkthrough(tmp_path, default_ports):
         wait_for(lambda: _serves_skeletons(tmp_path), 120, "skeletons from the QTM stand-in's take")
 
 
+@pytest.mark.timeout(900)  # ten commands, each a solve or a calibration of a whole take
 def test_the_offline_commands(tmp_path):
     for command in OFFLINE:
         run(command, tmp_path, timeout=600)
