@@ -6,10 +6,10 @@ import logging
 import numpy as np
 
 from mocap_cli.solve import actor_path
-from mocap_core.fit.calibration import calibrate
+from mocap_core.fit.calibration import STILL_M, calibrate, is_static
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.warmup import ensure_compiled
-from mocap_core.skeleton import JOINTS
+from mocap_core.skeleton import INDEX, JOINTS
 from nodes.bags import read_take
 
 log = logging.getLogger("mocap.calibrate")
@@ -45,6 +45,10 @@ def run(args) -> int:
 
 def _calibrate(rec, profile_name: str, out: str) -> None:
     profile = profile_for(profile_name, rec.labels, log)
+    static = is_static(rec.positions)
+    if static:
+        log.info("a static trial (every marker within %.0f mm of its mean place): each marker rides the nearest bone "
+                 "of its body segment, by profile %s's landmarks and tracking lists", STILL_M * 1000, profile.name)
     subject = calibrate(rec.positions, rec.labels, profile, rec.rate_hz)
     subject.save(out)
     lengths = subject.lengths()
@@ -57,3 +61,24 @@ def _calibrate(rec, profile_name: str, out: str) -> None:
     missing = [j for i, j in enumerate(JOINTS) if not subject.known[i]]
     if missing:
         log.warning("never located, so not solved: %s (the profile lacks their landmarks)", ", ".join(missing))
+    if not static:  # (a static trial has no motion to find joints from)
+        _from_motion(rec, profile, subject)
+
+
+def _from_motion(rec, profile, subject) -> None:
+    """Say where the take's motion puts the hips, knees and elbows (functional centres), beside the landmarks'."""
+    from mocap_core.experiments import localize_take
+    from mocap_core.fit.calibration import bone_of_each
+    from mocap_core.fit.functional import functional_centres
+
+    located = localize_take(rec, profile)[0]
+    markers = rec.positions.astype(np.float64)
+    for found in functional_centres(markers, bone_of_each(profile, rec.labels, subject), INDEX):
+        if found.why:
+            log.info("from motion: %s", found.why)
+            continue
+        apart = np.linalg.norm(found.positions - located[:, INDEX[found.joint]], axis=1)
+        where = (f"{np.nanmean(apart) * 1000:.0f} mm from where the landmarks put it" if np.isfinite(apart).any()
+                 else "no landmark locates it")
+        log.info("from motion: %s found (to within %.0f mm by its fit), %s", found.joint,
+                 found.centre.uncertainty_m.max() * 1000, where)

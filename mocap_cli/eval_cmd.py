@@ -127,9 +127,10 @@ def add_parser(sub) -> None:
     tg.add_argument("--no-plots", action="store_true")
     tg.set_defaults(func=run_targets)
 
-    from mocap_cli import options_eval, rigid_eval
+    from mocap_cli import options_eval, protocol_eval, rigid_eval
     rigid_eval.register(esub)
     options_eval.register(esub)
+    protocol_eval.register(esub)
 
 
 def run_timing(args) -> int:

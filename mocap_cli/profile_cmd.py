@@ -17,6 +17,8 @@ def add_parser(sub) -> None:
     e = psub.add_parser("explain", help="each landmark: where it is on the body, the joints that need it, and "
                                         "(with --profile) the labels a profile gives it")
     e.add_argument("--profile", help="a profile to show against the landmarks (a name from profiles/ or a path)")
+    e.add_argument("--subject", help="a subject file (`mocap calibrate`): which joints come from the profile's "
+                                     "landmarks and which from the subject's markers")
     e.add_argument("--markdown", action="store_true", help="the page docs/landmarks.md is: a table, with the labels "
                                                            "of every shipped profile")
     e.set_defaults(func=cmd_explain)
@@ -45,7 +47,24 @@ def cmd_explain(args) -> int:
         never = describe_missing(unlocatable(frozenset(profile.landmarks)))
         print(f"\nJoints {profile.name} cannot locate:")
         print("\n".join(f"- {line}" for line in never) if never else "None: its landmarks locate every joint.")
+        if args.subject:
+            print(joint_sources(profile, args.subject))
     return 0
+
+
+def joint_sources(profile, subject_path: str) -> str:
+    """Where each joint comes from when a take is solved with this profile and subject."""
+    from mocap_core.fit.subject import load_subject
+    from mocap_core.skeleton import JOINTS
+
+    subject = load_subject(subject_path)
+    never = unlocatable(frozenset(profile.landmarks))
+    landmarks = [j for j in JOINTS if j not in never]
+    from_subject = [j for j in never if subject.known[JOINTS.index(j)]]
+    nowhere = [j for j in never if j not in from_subject]
+    return (f"\nWith subject {subject_path}:\n- from {profile.name}'s landmarks (and, where they are lost, the "
+            f"subject's markers): {', '.join(landmarks)}\n- from the subject's markers alone: "
+            f"{', '.join(from_subject) or 'none'}\n- nowhere (neither locates them): {', '.join(nowhere) or 'none'}")
 
 
 def landmarks_page() -> str:

@@ -115,6 +115,16 @@ def _solve(args, rec) -> dict:
     missing = unlocatable(frozenset(profile.landmarks))
     if not (args.thesis or args.no_ik):  # (the rigid chains put a head no marker locates on the neck)
         missing = {j: fixes for j, fixes in missing.items() if j not in FOLLOW_THE_NECK}
+    subject = None
+    if args.subject:
+        from mocap_core.fit.subject import load_subject
+        subject = load_subject(args.subject)
+        # A movement trial's profile may lack the landmarks a static trial had: the subject's markers place them.
+        known = [j for j in missing if subject.known[JOINTS.index(j)]]
+        if known:
+            log.info("no landmark of profile %s locates %s: solved from subject %s's markers", profile.name,
+                     ", ".join(known), args.subject)
+        missing = {j: fixes for j, fixes in missing.items() if j not in known}
     never = describe_missing(missing)
     if never and not args.allow_missing and not profile.drafted:  # (a draft's log has said what it lacks)
         raise SystemExit(f"mocap solve: profile {profile.name} cannot locate these joints in any frame:\n  "
@@ -125,24 +135,21 @@ def _solve(args, rec) -> dict:
     if (args.fit or args.subject) and (args.thesis or args.no_ik):
         raise SystemExit("mocap solve: --fit and --subject solve with a rigid skeleton; drop --thesis/--no-ik")
     if args.fit:
-        return _write(args, rec, profile, _fitted(args, rec, profile), started)
+        return _write(args, rec, profile, _fitted(args, rec, profile, subject), started)
     params = SolverParams(max_iterations=args.max_iterations, stop_distance_m=args.stop_distance,
                           constraints=not args.no_constraints)
     pipe = SkeletonPipeline(profile, rec.labels, args.solver, params, load_constraints(args.constraints),
                             fill_gaps=not args.no_ik, options="thesis" if args.thesis else "studio", rate_hz=rec.rate_hz)
-    if args.subject:  # (as an ik_gapfill node's subject param)
-        from mocap_core.fit.subject import load_subject
-        pipe.use(load_subject(args.subject))
+    if subject is not None:  # (as an ik_gapfill node's subject param)
+        pipe.use(subject)
     return _write(args, rec, profile, pipe.run(rec.positions), started)
 
 
-def _fitted(args, rec, profile):
-    """The fit's frames, as one chunk (calibrating first unless a subject file is given)."""
+def _fitted(args, rec, profile, subject):
+    """The fit's frames, as one chunk (calibrating first unless a ``subject`` is given)."""
     from mocap_core.fit.fitter import FitSettings
-    from mocap_core.fit.subject import load_subject
     from mocap_core.fit.take import fit_take
 
-    subject = load_subject(args.subject) if args.subject else None
     if subject is None:
         log.info("calibrating the subject from the take (save one with `mocap calibrate` to reuse it)")
     settings = FitSettings(limits=not args.no_constraints)

@@ -41,6 +41,17 @@ LANDMARK_INDEX = {name: i for i, name in enumerate(LANDMARKS)}
 # Bones whose extra markers a profile may list under ``tracking`` (mocap_core.segment_rebuild uses them).
 TRACKING_BONES = ("upper_arm", "forearm", "thigh", "shank", "foot")
 TRACKING_SEGMENTS: tuple[str, ...] = tuple(f"{side}_{bone}" for bone in TRACKING_BONES for side in SIDES)
+# The body segment each landmark and tracking segment sits on, as the skeleton's bones (a bone is named after the joint
+# it starts from: the shank is ``knee``), for a calibration that places markers on bones: the epicondyles are on the
+# femur though they locate the knee, the malleoli on the shank though they locate the ankle. The foot is two bones of
+# one segment, the trunk several; the spine's landmarks are left to the data.
+SEGMENT_BONES = {"pelvis": ("pelvis",), "head": ("head",), "scapula": ("clavicle",), "upper_arm": ("shoulder",),
+                 "forearm": ("elbow",), "hand": ("wrist",), "thigh": ("hip",), "shank": ("knee",),
+                 "foot": ("ankle", "foot")}
+LANDMARK_SEGMENT = {"SACR": "pelvis", "IAS": "pelvis", "SGL": "head", "HEAD": "head", "SAE": "scapula",
+                    "HLE": "upper_arm", "HME": "upper_arm", "UOA": "forearm", "RSP": "forearm", "USP": "forearm",
+                    "HM2": "hand", "FLE": "thigh", "FME": "thigh", "PAS": "shank", "TTC": "shank", "FAL": "shank",
+                    "TAM": "shank", "FCC": "foot", "FM2": "foot"}
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "profiles"
 _MEAN = re.compile(r"^mean\((.*)\)$")
 
@@ -107,6 +118,26 @@ class Profile(BaseModel):
     def markers_of(self, landmark: str) -> list[str]:
         """The labels a landmark is the mean of (one for most)."""
         return parse_expression(self.landmarks[landmark], self.where(landmark))
+
+    def marker_bones(self, labels: list[str]) -> list[tuple[str, ...]]:
+        """For each label, the bones (joint names) of the body segment the profile puts it on: its landmark's
+        (SEGMENT_BONES, LANDMARK_SEGMENT) or its tracking segment's; () for a marker the profile places nowhere."""
+        where: dict[str, tuple[str, ...]] = {}
+        for segment, names in self.tracking.items():
+            side, _, part = segment.partition("_")
+            for n in names:
+                where[n] = tuple(f"{b}_{side.lower()}" for b in SEGMENT_BONES[part])
+        for landmark in self.landmarks:
+            side, _, name = landmark.rpartition("_")
+            segment = LANDMARK_SEGMENT.get(name)
+            if segment is None:
+                continue
+            bones = SEGMENT_BONES[segment]
+            if segment not in ("pelvis", "head"):  # the others are a side's
+                bones = tuple(f"{b}_{side.lower()}" for b in bones)
+            for n in self.markers_of(landmark):
+                where[n] = bones
+        return [where.get(label, ()) for label in self.columns(labels)]
 
     def resolve(self, labels: list[str]) -> "LandmarkMap":
         index = self.columns(labels)

@@ -33,6 +33,8 @@ class CalibrationSettings:
     refinements: int = 1            # rounds of markers re-placed on the fitted bone frames
 
 
+# A take whose every marker stays this close to its mean place is a static trial (a standing subject sways).
+STILL_M = 0.03
 # A marker's stray on a bone: how far from its median place it is in this share of the frames. Not the median:
 # a static marker (a starting block) rides a limb that rests on it for half the take.
 STRAY_PERCENTILE = 90
@@ -52,12 +54,39 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz:
     landmark_map = profile.resolve(labels)
     loc = Localizer(profile.body).localize(landmark_map.apply(markers))
     offsets, known, rest = joint_offsets(loc.positions, loc.frames, s)
-    bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s)
+    still = anatomy(profile, labels) if is_static(markers) else None
+    bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s, still)
     clean = list(profile.columns(labels))
     subject = Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest)
     for _ in range(s.refinements):
-        subject = refine(subject, markers, clean, rate_hz, s, fit_settings)
+        subject = refine(subject, markers, clean, rate_hz, s, fit_settings, still)
     return subject
+
+
+def is_static(markers: np.ndarray) -> bool:
+    """A static trial: every marker stays within STILL_M of its mean place (a standing subject sways)."""
+    with np.errstate(invalid="ignore"):
+        spread = np.linalg.norm(markers - np.nanmean(markers, axis=0), axis=-1)
+    return bool(np.isfinite(spread).any() and np.nanmax(spread) <= STILL_M)
+
+
+def anatomy(profile: Profile, labels: list[str]) -> np.ndarray:
+    """(M, J) the bones of each marker's body segment, where the profile places it (none where it does not)."""
+    out = np.zeros((len(labels), len(JOINTS)), bool)
+    for k, bones in enumerate(profile.marker_bones(labels)):
+        out[k, [INDEX[b] for b in bones]] = True
+    return out
+
+
+def bone_of_each(profile: Profile, labels: list[str], subject: Subject) -> np.ndarray:
+    """(M,) the bone each of ``labels`` rides: its body segment's where the profile names one bone for it, else the
+    subject's (-1: none)."""
+    rows = subject.marker_index(list(profile.columns(labels)))
+    out = np.where(rows >= 0, subject.marker_bone[np.maximum(rows, 0)], -1)
+    for k, bones in enumerate(profile.marker_bones(labels)):
+        if len(bones) == 1:
+            out[k] = INDEX[bones[0]]
+    return out
 
 
 def calibrate_bones(P: np.ndarray, R: np.ndarray, name: str, settings: CalibrationSettings | None = None) -> Subject:
@@ -187,10 +216,15 @@ def _local_offsets(skeleton, joints, parents, out):
             out[k] = np.nan
 
 
-def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.ndarray, s: CalibrationSettings):
+def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.ndarray, s: CalibrationSettings,
+                   still: np.ndarray | None = None):
     """For every marker: the bone it strays least on, its median offset there and that stray (-1 / NaN: none).
     Two bones are compared on the frames where both are located with the marker seen: a bone located in a few
-    frames only would otherwise win on the little it moved in them."""
+    frames only would otherwise win on the little it moved in them. A static trial (``still`` given: (M, J) bool,
+    the bones of each marker's body segment by the profile's anatomy) tells few bones apart, as every marker strays
+    little on every bone near it: of the bones it strays on within TIE_M of the least, the marker rides the nearest of
+    its segment's (an epicondyle rides the femur though it locates the knee), or the nearest of all where the profile
+    places it nowhere."""
     m = markers.shape[1]
     candidates = np.flatnonzero(ROTATING & known)
     local = np.einsum("fbxa,fbmx->fbma", R[:, candidates], markers[:, None] - P[:, candidates, None])  # (F,B,M,3)
@@ -202,10 +236,9 @@ def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.
         return np.percentile(np.linalg.norm(pts - np.median(pts, axis=0), axis=1), STRAY_PERCENTILE)
 
     for k in range(m):
+        seen = [b for b in range(len(candidates)) if ok[:, b, k].sum() >= s.min_frames]
         best = -1
-        for b in range(len(candidates)):
-            if ok[:, b, k].sum() < s.min_frames:
-                continue
+        for b in seen:
             if best < 0:
                 best = b
                 continue
@@ -215,20 +248,46 @@ def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.
                     best = b
             elif ok[:, b, k].sum() > ok[:, best, k].sum():
                 best = b
-        if best >= 0:
-            frames = ok[:, best, k]
-            spread[k] = stray(best, k, frames)
-            if spread[k] <= s.max_spread_m:
-                bone[k], offset[k] = candidates[best], np.median(local[frames, best, k], axis=0)
+        if best < 0:
+            continue
+        tied = [b for b in seen if b == best or _tie(stray, ok, b, best, k, s)] if still is not None else []
+        if len(tied) > 1:
+            tied = [b for b in tied if still[k, candidates[b]]] or tied
+            best = tied[int(np.argmin([_bone_distance(markers[:, k], P, candidates[b]) for b in tied]))]
+        frames = ok[:, best, k]
+        spread[k] = stray(best, k, frames)
+        if spread[k] <= s.max_spread_m:
+            bone[k], offset[k] = candidates[best], np.median(local[frames, best, k], axis=0)
     return bone, offset, np.where(bone >= 0, spread, np.nan)
 
 
+# Strays closer than this (about a marker's wobble on the skin) do not tell two bones apart.
+TIE_M = 0.005
+
+
+def _tie(stray, ok, b, best, k, s) -> bool:
+    both = ok[:, b, k] & ok[:, best, k]
+    return both.sum() >= s.min_frames and stray(b, k, both) <= stray(best, k, both) + TIE_M
+
+
+def _bone_distance(marker: np.ndarray, P: np.ndarray, j: int) -> float:
+    """The median distance (over frames) of a marker's track from bone j: the segments from its joint to each child."""
+    out = np.inf
+    for c in np.flatnonzero(PARENT_INDEX == j):
+        a, d = P[:, j], P[:, c] - P[:, j]
+        t = np.clip(np.einsum("fx,fx->f", marker - a, d) / np.maximum(np.einsum("fx,fx->f", d, d), 1e-12), 0, 1)
+        dist = np.linalg.norm(marker - a - t[:, None] * d, axis=1)
+        if np.isfinite(dist).any():
+            out = min(out, float(np.nanmedian(dist)))
+    return out
+
+
 def refine(subject: Subject, markers: np.ndarray, labels: list[str], rate_hz: float,
-           s: CalibrationSettings, fit_settings=None) -> Subject:
+           s: CalibrationSettings, fit_settings=None, still: np.ndarray | None = None) -> Subject:
     """The markers' bones and offsets again, from the fitted bone frames: the fit places every bone in every
     frame, so each marker is judged on every bone over the same frames, and on frames that its neighbours'
     markers fix (the localization's frames lean on a few landmarks each)."""
     from mocap_core.fit.fitter import SkeletonFitter
     P, R, _, _ = SkeletonFitter(subject, labels, fit_settings, rate_hz=rate_hz).fit_all(markers)
-    bone, c, spread = marker_offsets(markers, P, R, subject.known, s)
+    bone, c, spread = marker_offsets(markers, P, R, subject.known, s, still)
     return replace(subject, marker_bone=bone, marker_offsets=c, spread_m=spread)

@@ -1,0 +1,90 @@
+"""The biomechanics protocol on a take (``mocap eval protocol``): a static trial calibrates the subject, movement trials
+without the anatomical markers are solved with it, and the take's motion places the hips, knees and elbows.
+
+From a take with every marker: its stillest second is the static trial (a standing subject sways, so "still" is every
+marker within STILL_M of its mean); the movement trial is the take with the knee, ankle and elbow landmarks' markers
+hidden from 1 s on (``landmarks_off``), or with only the pelvis, head, hand and toe markers (``worst``, the thesis's
+worst case). Each is solved by the studio stages and by the fit, with the subject from the static trial and, for
+comparison, from the complete take; the knees, ankles and elbows are measured against where the landmarks put them
+in the complete take.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mocap_core.experiments import localize_take
+from mocap_core.fit.calibration import STILL_M, bone_of_each, calibrate
+from mocap_core.fit.compare import WORST_CASE_LANDMARKS, solve
+from mocap_core.fit.functional import functional_centres
+from mocap_core.profiles import Profile
+from mocap_core.recordings import Recording
+from mocap_core.skeleton import INDEX
+
+
+ANATOMICAL = ("HLE", "HME", "UOA", "FLE", "FME", "PAS", "TTC", "FAL", "TAM")
+MEASURED = tuple(f"{j}_{s}" for j in ("knee", "ankle", "elbow") for s in "lr")
+METHODS = ("studio_subject", "fit_subject")
+
+
+def stillest_second(markers: np.ndarray, rate_hz: float) -> tuple[int, float]:
+    """(first frame, largest distance of any marker from its mean in metres) of the take's stillest second with
+    every marker seen."""
+    n = max(1, int(round(rate_hz)))
+    best = (-1, np.inf)
+    for start in range(0, len(markers) - n + 1, max(1, n // 10)):
+        window = markers[start:start + n]
+        if np.isfinite(window).all():
+            travel = float(np.linalg.norm(window - window.mean(axis=0), axis=-1).max())
+            if travel < best[1]:
+                best = (start, travel)
+    return best
+
+
+def movement(markers: np.ndarray, profile: Profile, labels: list[str], variant: str, start: int) -> np.ndarray:
+    """The take as a movement trial: ``landmarks_off`` (the anatomical markers hidden from ``start``) or ``worst``
+    (only the pelvis, head, hand and toe markers from ``start``)."""
+    col = list(profile.columns(labels))
+    names = {n: lm for lm in profile.landmarks for n in profile.markers_of(lm)}
+    if variant == "landmarks_off":
+        hide = [k for k, x in enumerate(col) if names.get(x, "").rpartition("_")[2] in ANATOMICAL]
+    else:
+        kept = {n for n, lm in names.items() if lm in WORST_CASE_LANDMARKS}
+        hide = [k for k, x in enumerate(col) if x not in kept]
+    out = markers.copy()
+    out[start:, hide] = np.nan
+    return out
+
+
+def run_protocol(rec: Recording, profile: Profile) -> tuple[list[dict], list[dict]]:
+    """(solve rows, functional-centre rows) for one take; no solve rows when it has no still second."""
+    markers = rec.positions.astype(np.float64)
+    located = localize_take(rec, profile)[0]
+    complete = calibrate(markers, rec.labels, profile, rec.rate_hz)
+    centres = []
+    for found in functional_centres(markers, bone_of_each(profile, rec.labels, complete), INDEX):
+        row = {"joint": found.joint, "found": not found.why, "why": found.why}
+        if found.positions is not None:
+            row["uncertainty_mm"] = float(found.centre.uncertainty_m.max() * 1000)
+            row["from_landmarks_mm"] = float(np.nanmean(np.linalg.norm(found.positions - located[:, INDEX[found.joint]],
+                                                                       axis=1)) * 1000)
+        centres.append(row)
+    first, travel = stillest_second(markers, rec.rate_hz)
+    if travel > STILL_M:  # (inf: no second sees every marker)
+        return [{"static_s": float("nan"), "sway_mm": travel * 1000}], centres
+    n = int(round(rec.rate_hz))
+    static = calibrate(markers[first:first + n], rec.labels, profile, rec.rate_hz)
+    rows = []
+    for variant in ("landmarks_off", "worst"):
+        trial = movement(markers, profile, rec.labels, variant, n)
+        for method in METHODS:
+            for subject_from, subject in (("static", static), ("complete", complete)):
+                pos = solve(method, trial, rec, profile, subject)[0]
+                row = {"static_s": first / rec.rate_hz, "sway_mm": travel * 1000, "variant": variant,
+                       "method": method, "subject": subject_from,
+                       "every_joint_pct": float(np.isfinite(pos[:, subject.known]).all(axis=(1, 2)).mean() * 100)}
+                for j in MEASURED:
+                    ok = np.isfinite(located[n:, INDEX[j]]).all(axis=1)
+                    row[j] = float(np.nanmean(np.linalg.norm(pos[n:, INDEX[j]] - located[n:, INDEX[j]], axis=1)[ok])
+                                   * 1000)
+                rows.append(row)
+    return rows, centres
