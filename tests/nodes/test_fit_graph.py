@@ -103,3 +103,44 @@ def test_the_graph_fits_each_limb_to_a_subjects_markers_as_the_offline_solve_doe
         offline[with_markers] = np.concatenate([c.positions for c in pipe.run(hidden.astype(np.float64))])
     assert np.nanmax(np.abs(graph_pos - offline[True])) < 1e-3
     assert np.nanmax(np.abs(offline[False] - offline[True])) > 0.01  # (the markers moved the limbs)
+
+
+def test_the_graph_solves_a_movement_trial_with_a_static_trials_subject(tmp_path):
+    """The biomechanics protocol live: a subject from the karate take's still second, then the card's graph on the
+    take without its knee, ankle and elbow markers, through a profile without their landmarks: every joint in every
+    frame (the subject's markers place what no landmark does)."""
+    import yaml
+    from mocap_core.fit.calibration import calibrate
+    from mocap_core.fit.protocol import stillest_second
+    from mocap_core.profiles import PROFILE_DIR, load_profile
+    from mocap_core.recordings import read_recording, write_c3d
+    from mocap_core.skeleton import Status
+    from messages import decode
+    from nodes.bags import read_bag
+    from tests.conftest import pipeline_graph
+    from tests.test_protocol import ANATOMICAL
+
+    rec = read_recording(data_file("08_cmu_135_02_karate_kata.c3d"))
+    first, _ = stillest_second(rec.positions[:int(6 * rec.rate_hz)].astype(np.float64), rec.rate_hz)
+    still = rec.slice(first, first + int(rec.rate_hz))
+    calibrate(still.positions, still.labels, load_profile("cmu41"), rec.rate_hz).save(tmp_path / "actor.yaml")
+    keep = [k for k, x in enumerate(rec.labels) if x.split(":")[-1] not in ANATOMICAL]
+    frames = 150
+    take = tmp_path / "move.c3d"
+    write_c3d(type(rec)([rec.labels[k] for k in keep], rec.positions[600:600 + frames, keep], rec.rate_hz), take)
+    doc = yaml.safe_load((PROFILE_DIR / "cmu41.yaml").read_text())
+    doc["landmarks"] = {lm: v for lm, v in doc["landmarks"].items() if v not in ANATOMICAL}
+    (tmp_path / "clusters.yaml").write_text(yaml.safe_dump({**doc, "name": "clusters"}))
+    bag = tmp_path / "solved.mcap"
+    source = f"{{path: {take}, max_frames: {frames}, lockstep_topic: skeleton/solved, lockstep_timeout_s: 30}}"
+    graph = pipeline_graph(source, profile=str(tmp_path / "clusters.yaml"),
+                           extra=f"  - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [skeleton/solved]}}}}",
+                           retarget="{max_wait_ms: 5000}")
+    for limb in ("torso", "left_arm", "right_arm", "left_leg", "right_leg"):
+        graph = graph.replace(f"{{limb: {limb}}}", f"{{limb: {limb}, subject: {tmp_path / 'actor.yaml'}}}")
+    with launched(tmp_path, graph, "--until-done") as g:
+        g.proc.wait(timeout=180)
+        assert g.proc.returncode == 0, g.log()
+    solved = [decode(x.data, x.topic) for x in read_bag(bag, ["skeleton/solved"])]
+    assert len(solved) == frames
+    assert all((np.asarray(m.status) != Status.MISSING).all() for m in solved), "a joint missing in some frame"
