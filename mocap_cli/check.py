@@ -4,7 +4,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from mocap_core.landmark_needs import describe_missing, unlocatable
+from mocap_core.fit.subject import load_subject
+from mocap_core.landmark_needs import describe_missing, placed_by_subject, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, profile_for
 from mocap_core.recordings import Recording
 from mocap_core.take_check import (FLOOR_M, TOLERANCE, MarkerGaps, Stretch, marker_gaps, rigid_pairs, spacing_faults,
@@ -26,6 +27,8 @@ def add_parser(sub) -> None:
                                    "check.png (each faulty pair's distance over time).")
     s.add_argument("file", help="recording: .c3d, .trc, .mat (file.mat:take picks a take) or an MCAP bag")
     s.add_argument("--profile", default=AUTO, help=PROFILE_HELP)
+    s.add_argument("--subject", help="a subject file (`mocap calibrate` of a static trial): the joints its markers "
+                                     "place are not missing")
     s.add_argument("--report", default="reports/check", help="directory for check.md and check.png")
     s.add_argument("--no-plots", action="store_true")
     s.set_defaults(func=run)
@@ -39,7 +42,10 @@ def run(args) -> int:
     faults = spacing_faults(rec.positions, rigid_pairs(profile, rec.labels), rec.rate_hz)
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
-    never = describe_missing(unlocatable(frozenset(profile.landmarks)))
+    missing, placed = unlocatable(frozenset(profile.landmarks)), []
+    if args.subject:  # (a movement trial's profile, and the subject of its static trial)
+        placed, missing = placed_by_subject(missing, load_subject(args.subject).known)
+    never = describe_missing(missing) + [f"{j}: placed by subject {args.subject}'s markers" for j in placed]
     text = report(rec, profile.name, gaps, faults, never=never)
     (out / "check.md").write_text(text)
     print(report(rec, profile.name, gaps[:SHOWN_GAPS], faults, left_out=len(gaps) - SHOWN_GAPS, never=never))

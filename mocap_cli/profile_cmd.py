@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mocap_core.landmark_needs import describe_missing, needed_by, site, unlocatable
+from mocap_core.landmark_needs import describe_missing, needed_by, placed_by_subject, site, unlocatable
 from mocap_core.profile_draft import draft_yaml
 from mocap_core.profiles import DEFAULT_UP, LANDMARKS, load_profile, shipped
 from mocap_core.up_axis import recording_up_axis
@@ -57,14 +57,12 @@ def joint_sources(profile, subject_path: str) -> str:
     from mocap_core.fit.subject import load_subject
     from mocap_core.skeleton import JOINTS
 
-    subject = load_subject(subject_path)
     never = unlocatable(frozenset(profile.landmarks))
+    placed, nowhere = placed_by_subject(never, load_subject(subject_path).known)
     landmarks = [j for j in JOINTS if j not in never]
-    from_subject = [j for j in never if subject.known[JOINTS.index(j)]]
-    nowhere = [j for j in never if j not in from_subject]
     return (f"\nWith subject {subject_path}:\n- from {profile.name}'s landmarks (and, where they are lost, the "
             f"subject's markers): {', '.join(landmarks)}\n- from the subject's markers alone: "
-            f"{', '.join(from_subject) or 'none'}\n- nowhere (neither locates them): {', '.join(nowhere) or 'none'}")
+            f"{', '.join(placed) or 'none'}\n- nowhere (neither locates them): {', '.join(nowhere) or 'none'}")
 
 
 def landmarks_page() -> str:

@@ -14,7 +14,7 @@ from mocap_core.ik.constraints import load_constraints
 from mocap_core.ik.solvers import SOLVERS, SolverParams
 from mocap_core.joints_csv import JointsCsvWriter
 from mocap_core.pipeline import SkeletonPipeline
-from mocap_core.landmark_needs import FOLLOW_THE_NECK, describe_missing, unlocatable
+from mocap_core.landmark_needs import FOLLOW_THE_NECK, describe_missing, placed_by_subject, unlocatable
 from mocap_core.profiles import AUTO, PROFILE_HELP, actors, profile_for
 from mocap_core.skeleton import JOINTS, Status
 from mocap_core.up_axis import take_up_axis
@@ -120,11 +120,10 @@ def _solve(args, rec) -> dict:
         from mocap_core.fit.subject import load_subject
         subject = load_subject(args.subject)
         # A movement trial's profile may lack the landmarks a static trial had: the subject's markers place them.
-        known = [j for j in missing if subject.known[JOINTS.index(j)]]
-        if known:
+        placed, missing = placed_by_subject(missing, subject.known)
+        if placed:
             log.info("no landmark of profile %s locates %s: solved from subject %s's markers", profile.name,
-                     ", ".join(known), args.subject)
-        missing = {j: fixes for j, fixes in missing.items() if j not in known}
+                     ", ".join(placed), args.subject)
     never = describe_missing(missing)
     if never and not args.allow_missing and not profile.drafted:  # (a draft's log has said what it lacks)
         raise SystemExit(f"mocap solve: profile {profile.name} cannot locate these joints in any frame:\n  "

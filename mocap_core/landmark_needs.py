@@ -115,3 +115,10 @@ def needed_by() -> dict[str, list[str]]:
         without = _located(full - {name})
         out[name] = [JOINTS[j] for j in range(len(JOINTS)) if located[j] and not without[j]]
     return out
+
+
+def placed_by_subject(missing: dict[str, list], known: np.ndarray) -> tuple[list[str], dict[str, list]]:
+    """Of the joints no landmark locates (``unlocatable``), those a calibrated subject knows (``known``: (J,) bool; its
+    markers place them, as after a static trial) and the rest."""
+    placed = [j for j in missing if known[JOINTS.index(j)]]
+    return placed, {j: fixes for j, fixes in missing.items() if j not in placed}

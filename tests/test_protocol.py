@@ -85,6 +85,10 @@ def test_static_then_movement_round_trip(karate, tmp_path):
     explained = mocap("profile", "explain", "--profile", str(tmp_path / "clusters.yaml"), "--subject",
                       str(tmp_path / "subject.yaml")).stdout
     assert "from the subject's markers alone: elbow_l, elbow_r, knee_l, ankle_l, knee_r, ankle_r" in explained
+    checked = mocap("check", str(tmp_path / "move.c3d"), "--profile", str(tmp_path / "clusters.yaml"), "--subject",
+                    str(tmp_path / "subject.yaml"), "--report", str(tmp_path / "check"), "--no-plots").stdout
+    joints = checked.split("## Joints the profile cannot locate")[1].split("##")[0]
+    assert "knee_l: placed by subject" in joints and "needs" not in joints
 
 
 @pytest.mark.timeout(900)
