@@ -73,7 +73,7 @@ def _from_motion(rec, profile, subject) -> None:
 
     located = localize_take(rec, profile)[0]
     markers = rec.positions.astype(np.float64)
-    for found in functional_centres(markers, bone_of_each(profile, rec.labels, subject), INDEX):
+    for found in functional_centres(markers, bone_of_each(profile, rec.labels, subject), INDEX, located):
         if found.why:
             log.info("from motion: %s", found.why)
             continue

@@ -65,9 +65,13 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz:
 
 def is_static(markers: np.ndarray) -> bool:
     """A static trial: every marker stays within STILL_M of its mean place (a standing subject sways)."""
-    with np.errstate(invalid="ignore"):
-        spread = np.linalg.norm(markers - np.nanmean(markers, axis=0), axis=-1)
-    return bool(np.isfinite(spread).any() and np.nanmax(spread) <= STILL_M)
+    seen = np.isfinite(markers).all(axis=-1)
+    used = seen.any(axis=0)
+    if not used.any():
+        return False
+    x = markers[:, used]
+    mean = np.where(seen[:, used, None], x, 0).sum(axis=0) / seen[:, used].sum(axis=0)[:, None]
+    return bool(np.nanmax(np.linalg.norm(x - mean, axis=-1)) <= STILL_M)
 
 
 def anatomy(profile: Profile, labels: list[str]) -> np.ndarray:

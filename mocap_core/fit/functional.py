@@ -130,11 +130,13 @@ class Found:
     why: str = ""                  # why it is not to be trusted ("": it is)
 
 
-def functional_centres(markers: np.ndarray, marker_bone: np.ndarray, joint_index: dict[str, int]) -> list[Found]:
+def functional_centres(markers: np.ndarray, marker_bone: np.ndarray, joint_index: dict[str, int],
+                       located: np.ndarray | None = None) -> list[Found]:
     """The hips', knees' and elbows' centres from the take's motion (F, M, 3), each marker on the bone
-    ``marker_bone`` (a joint index, -1: none) names; each with why it is not to be trusted, if it is not. A knee's thigh includes the hip's centre once it is found (the
-    knee's centre then goes on its axis nearest the hip's); a hinge whose parent has no joint found goes on its axis
-    nearest the parent's markers."""
+    ``marker_bone`` (a joint index, -1: none) names; each with why it is not to be trusted, if it is not. The parent
+    bone's own joint (the hip for a knee) counts as one of its points: found from motion here, else where the
+    landmarks put it (``located`` (F, J, 3), NaN where not); a hinge's centre goes on its axis nearest that joint
+    (nearest the parent's markers without one)."""
     found: dict[str, np.ndarray] = {}
     out = []
     for side in "lr":
@@ -143,6 +145,9 @@ def functional_centres(markers: np.ndarray, marker_bone: np.ndarray, joint_index
             parent_bone = parent if parent == "pelvis" else f"{parent}_{side}"
             parent_markers = markers[:, marker_bone == joint_index[parent_bone]]
             above = found.get(parent_bone)
+            if above is None and located is not None and parent != "pelvis":
+                above = located[:, joint_index[parent_bone]]
+                above = above if np.isfinite(above).all(axis=1).any() else None
             if above is not None:
                 parent_markers = np.concatenate([above[:, None], parent_markers], axis=1)
             R, t = cluster_poses(parent_markers)
@@ -150,12 +155,10 @@ def functional_centres(markers: np.ndarray, marker_bone: np.ndarray, joint_index
             if not np.isfinite(R).any():
                 have = parent_markers.shape[1] - (above is not None)
                 out.append(Found(name, None, None, f"{name}: its parent bone {parent_bone} carries {have} marker(s)"
-                                 f"{' besides its found joint' if above is not None else ''}, and a pose needs 3"))
+                                 f"{' besides its joint' if above is not None else ''}, and a pose needs 3"))
                 continue
-            near = None
-            if hinge:
-                near = np.nanmean(in_frame(R, t, parent_markers[:, :1] if above is not None else parent_markers)
-                                  .reshape(-1, 3), axis=0)
+            near = np.nanmean(in_frame(R, t, parent_markers[:, :1] if above is not None else parent_markers)
+                              .reshape(-1, 3), axis=0) if hinge else None
             try:
                 c = centre_of_rotation(in_frame(R, t, child_markers), hinge, near, what=name)
             except NoCentre as e:

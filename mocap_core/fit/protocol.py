@@ -61,7 +61,7 @@ def run_protocol(rec: Recording, profile: Profile) -> tuple[list[dict], list[dic
     located = localize_take(rec, profile)[0]
     complete = calibrate(markers, rec.labels, profile, rec.rate_hz)
     centres = []
-    for found in functional_centres(markers, bone_of_each(profile, rec.labels, complete), INDEX):
+    for found in functional_centres(markers, bone_of_each(profile, rec.labels, complete), INDEX, located):
         row = {"joint": found.joint, "found": not found.why, "why": found.why}
         if found.positions is not None:
             row["uncertainty_mm"] = float(found.centre.uncertainty_m.max() * 1000)
