@@ -52,8 +52,8 @@ def _mm(x) -> str:
 
 def render(solves: list[dict], centres: list[dict]) -> str:
     lines = [f"Static trial: each take's stillest second (every marker within {STILL_M * 1000:.0f} mm of its mean). "
-             "Movement trials from 1 s: `landmarks_off` (knee, ankle and elbow markers hidden), `worst` (pelvis, head, "
-             "hand and toe markers only). Mean mm from where the landmarks put each joint in the complete take; the "
+             "Movement trials from 1 s: `landmarks_off` (knee, ankle and elbow markers hidden), `clusters` (only the "
+             "pelvis's markers and those no landmark names), `worst` (pelvis, head, hand and toe markers only). Mean mm from where the landmarks put each joint in the complete take; the "
              "subject from the static trial, or from the complete take for comparison.", "",
              "| take | static trial | variant | method | subject | every joint % | " + " | ".join(MEASURED) + " |",
              "|---|---|---|---|---|---|" + "---|" * len(MEASURED)]
@@ -63,12 +63,14 @@ def render(solves: list[dict], centres: list[dict]) -> str:
                    else "no second sees every marker")
             lines.append(f"| {r['take']} | none ({why}) |" + " |" * (4 + len(MEASURED)))
             continue
-        lines.append(f"| {r['take']} | {r['static_s']:.1f} s ({r['sway_mm']:.0f} mm) | {r['variant']} | {r['method']} | "
-                     f"{r['subject']} | {r['every_joint_pct']:.0f} | " + " | ".join(_mm(r[j]) for j in MEASURED) + " |")
+        cells = [r["take"], f"{r['static_s']:.1f} s ({r['sway_mm']:.0f} mm)", r["variant"], r["method"], r["subject"],
+                 f"{r['every_joint_pct']:.0f}", *(_mm(r[j]) for j in MEASURED)]
+        lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Functional centres from each take's motion: how far from the landmarks' centre, and how far off the "
               "fit's own residuals say it could be (found where that is within "
               f"{TOLERANCE_M * 1000:.0f} mm).", "",
-              "| take | joint | found | from the landmarks' mm | could be off by mm | why not |", "|---|---|---|---|---|---|"]
+              "| take | joint | found | from the landmarks' mm | could be off by mm | why not |",
+              "|---|---|---|---|---|---|"]
     for r in centres:
         why = r["why"].partition(": ")[2].partition(",")[0]
         lines.append(f"| {r['take']} | {r['joint']} | {'yes' if r['found'] else 'no'} | "

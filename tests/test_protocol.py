@@ -99,7 +99,7 @@ def test_eval_protocol_reports_the_static_trial_and_the_centres(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "protocol.csv")))
     karate = [r for r in rows if r["take"] == "karate"]
     assert {(r["variant"], r["method"], r["subject"]) for r in karate} == {
-        (v, m, s) for v in ("landmarks_off", "worst") for m in ("studio_subject", "fit_subject")
+        (v, m, s) for v in ("landmarks_off", "clusters", "worst") for m in ("studio_subject", "fit_subject")
         for s in ("static", "complete")}
     assert all(float(r["every_joint_pct"]) == 100 for r in karate)
     text = (tmp_path / "protocol.md").read_text()

@@ -95,9 +95,9 @@ def centre_of_rotation(local: np.ndarray, hinge: bool = False, near: np.ndarray 
     dims = 2 if hinge else 3          # a hinge's axis (the last direction) is not fitted
     plane = vt[:dims]
     c = plane.T @ ((plane @ A.T @ b) / s[:dims] ** 2)
-    # How far the centre may be off in each direction fitted: a marker's distance from the centre wobbles by the fit's
-    # residual (skin on muscle, over many frames alike, so no averaging down), which moves the centre by that much
-    # over the markers' excursion in that direction (Centre.uncertainty_m).
+    # How far the centre may be off in each direction fitted: the fit's residual (a marker's distance from the centre
+    # wobbling with the skin, times that distance; over many frames alike, so no averaging down) over the markers'
+    # excursion in that direction (Centre.uncertainty_m).
     wobble = float(np.sqrt(np.mean((A @ c - b) ** 2)))
     axis = None
     if hinge:  # the axis is the direction the markers did not move in; the centre goes on it nearest ``near``
@@ -106,11 +106,6 @@ def centre_of_rotation(local: np.ndarray, hinge: bool = False, near: np.ndarray 
             near = np.nanmean(local.reshape(-1, 3), axis=0)
         c = c + axis * float(axis @ (near - c))
     return Centre(c, axis, excursion, wobble / excursion[:dims])
-
-
-def _means(local: np.ndarray) -> list[np.ndarray]:
-    return [x[np.isfinite(x).all(axis=1)].mean(axis=0) for x in local.transpose(1, 0, 2)
-            if np.isfinite(x).all(axis=1).sum() >= 10]
 
 
 def _mm(v: np.ndarray) -> str:

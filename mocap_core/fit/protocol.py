@@ -3,8 +3,8 @@ without the anatomical markers are solved with it, and the take's motion places 
 
 From a take with every marker: its stillest second is the static trial (a standing subject sways, so "still" is every
 marker within STILL_M of its mean); the movement trial is the take with the knee, ankle and elbow landmarks' markers
-hidden from 1 s on (``landmarks_off``), or with only the pelvis, head, hand and toe markers (``worst``, the thesis's
-worst case). Each is solved by the studio stages and by the fit, with the subject from the static trial and, for
+hidden from 1 s on (``landmarks_off``), with only the pelvis's markers and those no landmark names (``clusters``), or
+with only the pelvis, head, hand and toe markers (``worst``, the thesis's worst case). Each is solved by the studio stages and by the fit, with the subject from the static trial and, for
 comparison, from the complete take; the knees, ankles and elbows are measured against where the landmarks put them
 in the complete take.
 """
@@ -24,6 +24,8 @@ from mocap_core.skeleton import INDEX
 ANATOMICAL = ("HLE", "HME", "UOA", "FLE", "FME", "PAS", "TTC", "FAL", "TAM")
 MEASURED = tuple(f"{j}_{s}" for j in ("knee", "ankle", "elbow") for s in "lr")
 METHODS = ("studio_subject", "fit_subject")
+VARIANTS = ("landmarks_off", "clusters", "worst")
+PELVIS = ("SACR", "L_IAS", "R_IAS")
 
 
 def stillest_second(markers: np.ndarray, rate_hz: float) -> tuple[int, float]:
@@ -41,12 +43,15 @@ def stillest_second(markers: np.ndarray, rate_hz: float) -> tuple[int, float]:
 
 
 def movement(markers: np.ndarray, profile: Profile, labels: list[str], variant: str, start: int) -> np.ndarray:
-    """The take as a movement trial: ``landmarks_off`` (the anatomical markers hidden from ``start``) or ``worst``
-    (only the pelvis, head, hand and toe markers from ``start``)."""
+    """The take as a movement trial from ``start`` on: ``landmarks_off`` (the anatomical markers hidden), ``clusters``
+    (only the pelvis's and the markers no landmark names: clusters, wands, tracking markers) or ``worst`` (only the
+    pelvis, head, hand and toe markers)."""
     col = list(profile.columns(labels))
     names = {n: lm for lm in profile.landmarks for n in profile.markers_of(lm)}
     if variant == "landmarks_off":
         hide = [k for k, x in enumerate(col) if names.get(x, "").rpartition("_")[2] in ANATOMICAL]
+    elif variant == "clusters":
+        hide = [k for k, x in enumerate(col) if x in names and names[x] not in PELVIS]
     else:
         kept = {n for n, lm in names.items() if lm in WORST_CASE_LANDMARKS}
         hide = [k for k, x in enumerate(col) if x not in kept]
@@ -74,7 +79,7 @@ def run_protocol(rec: Recording, profile: Profile) -> tuple[list[dict], list[dic
     n = int(round(rec.rate_hz))
     static = calibrate(markers[first:first + n], rec.labels, profile, rec.rate_hz)
     rows = []
-    for variant in ("landmarks_off", "worst"):
+    for variant in VARIANTS:
         trial = movement(markers, profile, rec.labels, variant, n)
         for method in METHODS:
             for subject_from, subject in (("static", static), ("complete", complete)):
