@@ -262,3 +262,16 @@ def test_live_calibration_in_the_background_fits_every_frame_meanwhile():
     assert live.calibrations >= 1 and live.subject is not None
     assert during and min(during) > 0  # every frame while calibrating came out with joints
     assert np.isfinite(out.positions[live.subject.known]).all()
+
+
+def test_a_static_trial_is_told_from_motion_with_markers_lost_or_never_seen():
+    from mocap_core.fit.calibration import is_static
+    rng = np.random.default_rng(0)
+    standing = np.tile(rng.uniform(-1, 1, (1, 5, 3)), (100, 1, 1)) + rng.normal(0, 0.004, (100, 5, 3))
+    standing[:, 3] = np.nan          # never seen
+    standing[40:60, 1] = np.nan      # lost a while
+    assert is_static(standing)
+    moving = standing.copy()
+    moving[:, 0, 0] += np.linspace(0, 0.3, 100)
+    assert not is_static(moving)
+    assert not is_static(np.full((10, 4, 3), np.nan))
