@@ -8,7 +8,8 @@ landmarks in every frame where they are seen. Over many such frames, robustly (m
   strays least (the 90th percentile of its distance from its median offset there), and that offset. A marker that moves
   with no bone (a prop, the floor, a marker that slides) is left unassigned.
 The profile's landmarks only seed the bone frames; every other marker (clusters, wands, extra markers)
-is found from the data, so a profile needs no ``tracking:`` list for the fit.
+is found from the data, so a profile needs no ``tracking:`` list for the fit. A static trial (every marker still)
+cannot tell the bones near a marker apart by its stray: there the profile's anatomy says which it rides.
 """
 from __future__ import annotations
 
