@@ -4,6 +4,7 @@ through the CLI; the static trial's markers ride their body segments' bones."""
 from __future__ import annotations
 
 import csv
+import re
 import subprocess
 import sys
 
@@ -105,3 +106,12 @@ def test_eval_protocol_reports_the_static_trial_and_the_centres(tmp_path):
     text = (tmp_path / "protocol.md").read_text()
     assert "| qualisys_walk | none (stillest second sways" in text
     assert "| karate | hip_l | no |" in text and "moved" in text   # a kata's hips move too little to place them
+
+
+def test_calibrate_says_where_the_motion_puts_the_joints(tmp_path):
+    """`mocap calibrate` on a take with motion logs each functional centre, here refused for too little motion."""
+    done = mocap("calibrate", str(data_file("08_cmu_135_02_karate_kata.c3d")), "--profile", "cmu41", "--seconds", "8",
+                 "-o", str(tmp_path / "actor.yaml"))
+    assert "a static trial" not in done.stderr
+    hips = [line for line in done.stderr.splitlines() if "from motion: hip_l" in line]
+    assert hips and re.search(r"it could be \d+ mm off \(at most 20\).*range-of-motion trial", hips[0]), hips
