@@ -77,8 +77,8 @@ def _from_motion(rec, profile, subject) -> None:
         if found.why:
             log.info("from motion: %s", found.why)
             continue
-        apart = np.linalg.norm(found.positions - located[:, INDEX[found.joint]], axis=1)
-        where = (f"{np.nanmean(apart) * 1000:.0f} mm from where the landmarks put it" if np.isfinite(apart).any()
+        apart = found.apart_m(located, INDEX)
+        where = (f"{apart * 1000:.0f} mm from where the landmarks put it" if np.isfinite(apart)
                  else "no landmark locates it")
         log.info("from motion: %s found (to within %.0f mm by its fit), %s", found.joint,
                  found.centre.uncertainty_m.max() * 1000, where)

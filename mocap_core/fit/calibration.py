@@ -55,24 +55,29 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz:
     landmark_map = profile.resolve(labels)
     loc = Localizer(profile.body).localize(landmark_map.apply(markers))
     offsets, known, rest = joint_offsets(loc.positions, loc.frames, s)
-    still = anatomy(profile, labels) if is_static(markers) else None
-    bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s, still)
+    segments = anatomy(profile, labels) if is_static(markers) else None
+    bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s, segments)
     clean = list(profile.columns(labels))
     subject = Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest)
     for _ in range(s.refinements):
-        subject = refine(subject, markers, clean, rate_hz, s, fit_settings, still)
+        subject = refine(subject, markers, clean, rate_hz, s, fit_settings, segments)
     return subject
 
 
 def is_static(markers: np.ndarray) -> bool:
     """A static trial: every marker stays within STILL_M of its mean place (a standing subject sways)."""
+    return sway(markers) <= STILL_M
+
+
+def sway(markers: np.ndarray) -> float:
+    """The farthest any marker of (F, M, 3) strays from its mean place over the frames that see it (inf: none seen)."""
     seen = np.isfinite(markers).all(axis=-1)
     used = seen.any(axis=0)
     if not used.any():
-        return False
+        return float("inf")
     x = markers[:, used]
     mean = np.where(seen[:, used, None], x, 0).sum(axis=0) / seen[:, used].sum(axis=0)[:, None]
-    return bool(np.nanmax(np.linalg.norm(x - mean, axis=-1)) <= STILL_M)
+    return float(np.nanmax(np.linalg.norm(x - mean, axis=-1)))
 
 
 def anatomy(profile: Profile, labels: list[str]) -> np.ndarray:
@@ -222,10 +227,10 @@ def _local_offsets(skeleton, joints, parents, out):
 
 
 def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.ndarray, s: CalibrationSettings,
-                   still: np.ndarray | None = None):
+                   segments: np.ndarray | None = None):
     """For every marker: the bone it strays least on, its median offset there and that stray (-1 / NaN: none).
     Two bones are compared on the frames where both are located with the marker seen: a bone located in a few
-    frames only would otherwise win on the little it moved in them. A static trial (``still`` given: (M, J) bool,
+    frames only would otherwise win on the little it moved in them. A static trial (``segments`` given: (M, J) bool,
     the bones of each marker's body segment by the profile's anatomy) tells few bones apart, as every marker strays
     little on every bone near it: of the bones it strays on within TIE_M of the least, the marker rides the nearest of
     its segment's (an epicondyle rides the femur though it locates the knee), or the nearest of all where the profile
@@ -255,9 +260,9 @@ def marker_offsets(markers: np.ndarray, P: np.ndarray, R: np.ndarray, known: np.
                 best = b
         if best < 0:
             continue
-        tied = [b for b in seen if b == best or _tie(stray, ok, b, best, k, s)] if still is not None else []
+        tied = [b for b in seen if b == best or _tie(stray, ok, b, best, k, s)] if segments is not None else []
         if len(tied) > 1:
-            tied = [b for b in tied if still[k, candidates[b]]] or tied
+            tied = [b for b in tied if segments[k, candidates[b]]] or tied
             best = tied[int(np.argmin([_bone_distance(markers[:, k], P, candidates[b]) for b in tied]))]
         frames = ok[:, best, k]
         spread[k] = stray(best, k, frames)
@@ -288,11 +293,11 @@ def _bone_distance(marker: np.ndarray, P: np.ndarray, j: int) -> float:
 
 
 def refine(subject: Subject, markers: np.ndarray, labels: list[str], rate_hz: float,
-           s: CalibrationSettings, fit_settings=None, still: np.ndarray | None = None) -> Subject:
+           s: CalibrationSettings, fit_settings=None, segments: np.ndarray | None = None) -> Subject:
     """The markers' bones and offsets again, from the fitted bone frames: the fit places every bone in every
     frame, so each marker is judged on every bone over the same frames, and on frames that its neighbours'
     markers fix (the localization's frames lean on a few landmarks each)."""
     from mocap_core.fit.fitter import SkeletonFitter
     P, R, _, _ = SkeletonFitter(subject, labels, fit_settings, rate_hz=rate_hz).fit_all(markers)
-    bone, c, spread = marker_offsets(markers, P, R, subject.known, s, still)
+    bone, c, spread = marker_offsets(markers, P, R, subject.known, s, segments)
     return replace(subject, marker_bone=bone, marker_offsets=c, spread_m=spread)

@@ -124,6 +124,12 @@ class Found:
     centre: Centre | None
     why: str = ""                  # why it is not to be trusted ("": it is)
 
+    def apart_m(self, located: np.ndarray, joint_index: dict[str, int]) -> float:
+        """The mean distance (m) from where the landmarks put the joint (``located`` (F, J, 3)); NaN where they never
+        do."""
+        apart = np.linalg.norm(self.positions - located[:, joint_index[self.joint]], axis=1)
+        return float(np.nanmean(apart)) if np.isfinite(apart).any() else float("nan")
+
 
 def functional_centres(markers: np.ndarray, marker_bone: np.ndarray, joint_index: dict[str, int],
                        located: np.ndarray | None = None) -> list[Found]:

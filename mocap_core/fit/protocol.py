@@ -4,8 +4,9 @@ without the anatomical markers are solved with it, and the take's motion places 
 From a take with every marker: its stillest second is the static trial (a standing subject sways, so "still" is every
 marker within STILL_M of its mean); the movement trial is the take with the knee, ankle and elbow landmarks' markers
 hidden from 1 s on (``landmarks_off``), with only the pelvis's markers and those no landmark names (``clusters``), or
-with only the pelvis, head, hand and toe markers (``worst``, the thesis's worst case). Each is solved by the studio stages and by the fit, with the subject from the static trial and, for
-comparison, from the complete take; the knees, ankles and elbows are measured against where the landmarks put them
+with only the pelvis, head, hand and toe markers (``worst``, the thesis's worst case, as ``mocap eval rigid`` hides it).
+Each is solved by the studio stages and by the fit, with the subject from the static trial and, for comparison, from
+the complete take; the knees, ankles and elbows are measured against where the landmarks put them
 in the complete take.
 """
 from __future__ import annotations
@@ -13,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from mocap_core.experiments import localize_take
-from mocap_core.fit.calibration import STILL_M, bone_of_each, calibrate
-from mocap_core.fit.compare import WORST_CASE_LANDMARKS, solve
+from mocap_core.fit.calibration import STILL_M, bone_of_each, calibrate, sway
+from mocap_core.fit.compare import cases, solve
 from mocap_core.fit.functional import functional_centres
 from mocap_core.profiles import Profile
 from mocap_core.recordings import Recording
@@ -29,16 +30,13 @@ PELVIS = ("SACR", "L_IAS", "R_IAS")
 
 
 def stillest_second(markers: np.ndarray, rate_hz: float) -> tuple[int, float]:
-    """(first frame, largest distance of any marker from its mean in metres) of the take's stillest second with
-    every marker seen."""
+    """(first frame, its sway in metres: calibration.sway) of the take's stillest second with every marker seen."""
     n = max(1, int(round(rate_hz)))
     best = (-1, np.inf)
     for start in range(0, len(markers) - n + 1, max(1, n // 10)):
         window = markers[start:start + n]
-        if np.isfinite(window).all():
-            travel = float(np.linalg.norm(window - window.mean(axis=0), axis=-1).max())
-            if travel < best[1]:
-                best = (start, travel)
+        if np.isfinite(window).all() and sway(window) < best[1]:
+            best = (start, sway(window))
     return best
 
 
@@ -53,8 +51,8 @@ def movement(markers: np.ndarray, profile: Profile, labels: list[str], variant: 
     elif variant == "clusters":
         hide = [k for k, x in enumerate(col) if x in names and names[x] not in PELVIS]
     else:
-        kept = {n for n, lm in names.items() if lm in WORST_CASE_LANDMARKS}
-        hide = [k for k, x in enumerate(col) if x not in kept]
+        worst = next(c for c in cases(profile, labels, start) if c.name == "worst")
+        hide = [col.index(x) for x in worst.hidden]
     out = markers.copy()
     out[start:, hide] = np.nan
     return out
@@ -70,8 +68,7 @@ def run_protocol(rec: Recording, profile: Profile) -> tuple[list[dict], list[dic
         row = {"joint": found.joint, "found": not found.why, "why": found.why}
         if found.positions is not None:
             row["uncertainty_mm"] = float(found.centre.uncertainty_m.max() * 1000)
-            row["from_landmarks_mm"] = float(np.nanmean(np.linalg.norm(found.positions - located[:, INDEX[found.joint]],
-                                                                       axis=1)) * 1000)
+            row["from_landmarks_mm"] = found.apart_m(located, INDEX) * 1000
         centres.append(row)
     first, travel = stillest_second(markers, rec.rate_hz)
     if travel > STILL_M:  # (inf: no second sees every marker)
