@@ -79,6 +79,7 @@ def _from_motion(rec, profile, subject) -> None:
             continue
         apart = found.apart_m(located, INDEX)
         where = (f"{apart * 1000:.0f} mm from where the landmarks put it" if np.isfinite(apart)
-                 else "no landmark locates it")
+                 else "no landmark locates it: the subject has it from here"
+                 if found.joint in subject.from_motion else "no landmark locates it")
         log.info("from motion: %s found (to within %.0f mm by its fit), %s", found.joint,
                  found.centre.uncertainty_m.max() * 1000, where)

@@ -44,8 +44,12 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     missing, placed = unlocatable(frozenset(profile.landmarks)), []
     if args.subject:  # (a movement trial's profile, and the subject of its static trial)
-        placed, missing = placed_by_subject(missing, load_subject(args.subject).known)
-    never = describe_missing(missing) + [f"{j}: placed by subject {args.subject}'s markers" for j in placed]
+        subject = load_subject(args.subject)
+        placed, missing = placed_by_subject(missing, subject.known)
+    never = describe_missing(missing) + [
+        f"{j}: placed by subject {args.subject}'s markers"
+        + (" (its centre found from the calibration take's motion)" if j in subject.from_motion else "")
+        for j in placed]
     text = report(rec, profile.name, gaps, faults, never=never)
     (out / "check.md").write_text(text)
     print(report(rec, profile.name, gaps[:SHOWN_GAPS], faults, left_out=len(gaps) - SHOWN_GAPS, never=never))

@@ -58,11 +58,16 @@ def joint_sources(profile, subject_path: str) -> str:
     from mocap_core.skeleton import JOINTS
 
     never = unlocatable(frozenset(profile.landmarks))
-    placed, nowhere = placed_by_subject(never, load_subject(subject_path).known)
+    subject = load_subject(subject_path)
+    placed, nowhere = placed_by_subject(never, subject.known)
     landmarks = [j for j in JOINTS if j not in never]
+    motion = [j for j in placed if j in subject.from_motion]
+    placed = [j for j in placed if j not in motion]
     return (f"\nWith subject {subject_path}:\n- from {profile.name}'s landmarks (and, where they are lost, the "
             f"subject's markers): {', '.join(landmarks)}\n- from the subject's markers alone: "
-            f"{', '.join(placed) or 'none'}\n- nowhere (neither locates them): {', '.join(nowhere) or 'none'}")
+            f"{', '.join(placed) or 'none'}\n- from the subject's markers, where the calibration take's motion put "
+            f"the joint (no landmark did): {', '.join(motion) or 'none'}\n- nowhere (neither locates them): "
+            f"{', '.join(nowhere) or 'none'}")
 
 
 def landmarks_page() -> str:

@@ -53,7 +53,8 @@ def _mm(x) -> str:
 def render(solves: list[dict], centres: list[dict]) -> str:
     lines = [f"Static trial: each take's stillest second (every marker within {STILL_M * 1000:.0f} mm of its mean). "
              "Movement trials from 1 s: `landmarks_off` (knee, ankle and elbow markers hidden), `clusters` (only the "
-             "pelvis's markers and those no landmark names), `worst` (pelvis, head, hand and toe markers only). "
+             "pelvis's markers and those no landmark names), `worst` (pelvis, head, hand and toe markers only), "
+             "`worst_movement` (the same, solved through the profile without the knee, ankle and elbow landmarks). "
              "Mean mm from where the landmarks put each joint in the complete take; the subject from the static "
              "trial, or from the complete take for comparison.", "",
              "| take | static trial | variant | method | subject | every joint % | " + " | ".join(MEASURED) + " |",

@@ -24,7 +24,11 @@ LABELS = ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "SGL", "L_HEAD", "R_HE
           "L_FAL", "L_FCC", "L_FM2",
           "R_SAE", "R_HLE", "R_HME", "R_UOA", "R_RSP", "R_USP", "R_HM2", "R_PAS", "R_FLE", "R_TTC",
           "R_FAL", "R_FCC", "R_FM2")
+# Clusters (the movement trials of a biomechanics protocol): three markers on a plate on each thigh and shank.
+CLUSTERS = tuple(f"{s}_{part}{k}" for s in "LR" for part in ("THI", "SHK") for k in (1, 2, 3))
 STRIDE_HZ = 1.4
+# Each leg's hip and knee flexion, degrees: (mean, amplitude) over a stride. A range-of-motion trial bends them further.
+LEG_SWING = {"running": ((20, 28), (45, 40)), "range_of_motion": ((25, 50), (70, 65))}
 THIGH, SHANK, UPPER_ARM, FOREARM = 0.44, 0.42, 0.29, 0.26
 
 
@@ -39,8 +43,8 @@ def _down(angle: float) -> np.ndarray:
     return np.array([math.sin(angle), 0.0, -math.cos(angle)])
 
 
-def _pose(t: float):
-    """Joint centres and markers (dicts of name -> 3-vector) at time t."""
+def _pose(t: float, swing=LEG_SWING["running"]):
+    """Joint centres and markers (dicts of name -> 3-vector) at time t; ``swing``: the legs' (LEG_SWING)."""
     w = 2 * math.pi * STRIDE_HZ
     p = np.array([0.0, 0.01 * math.sin(w * t), 0.95 + 0.03 * math.sin(2 * w * t)])   # pelvis centre
     lean = math.radians(8)
@@ -50,7 +54,7 @@ def _pose(t: float):
     _trunk(p, up_t, joints, m)
     for s, S, sgn, phase in (("l", "L", 1.0, 0.0), ("r", "R", -1.0, math.pi)):
         ph = w * t + phase
-        _leg(s, sgn, ph, joints, m)
+        _leg(s, sgn, ph, swing, joints, m)
         _arm(s, sgn, ph, p + 0.53 * up_t, joints, m)
     behind = {s: math.sin(w * t + ph0) > 0.5 for s, ph0 in (("L", 0.0), ("R", math.pi))}  # arm swung back
     return joints, m, behind
@@ -81,11 +85,12 @@ def _trunk(p, up_t, joints, m) -> None:
     joints["head"] = head
 
 
-def _leg(s: str, sgn: float, ph: float, joints, m) -> None:
+def _leg(s: str, sgn: float, ph: float, swing, joints, m) -> None:
     """One leg in a running flexion pattern at phase ph."""
     S, side = s.upper(), np.array([0, sgn, 0])
-    hip_flex = math.radians(20 + 28 * math.sin(ph))
-    knee_flex = math.radians(45 + 40 * math.sin(ph - 1.2))
+    (hip_mean, hip_amp), (knee_mean, knee_amp) = swing
+    hip_flex = math.radians(hip_mean + hip_amp * math.sin(ph))
+    knee_flex = math.radians(knee_mean + knee_amp * math.sin(ph - 1.2))
     ankle = math.radians(8 * math.sin(ph + 0.6))
     hip = joints[f"hip_{s}"]
     knee = hip + THIGH * _down(hip_flex)
@@ -99,6 +104,11 @@ def _leg(s: str, sgn: float, ph: float, joints, m) -> None:
     m[f"{S}_TTC"] = knee + 0.045 * shank_fwd + 0.07 * shank_dir
     m[f"{S}_PAS"] = knee + 0.05 * shank_fwd - 0.07 * shank_dir
     m[f"{S}_FAL"] = ank + 0.042 * side
+    thigh_dir = (knee - hip) / THIGH
+    thigh_fwd = np.cross(side * sgn, thigh_dir) * -1
+    for k, (along, out, ahead) in enumerate(((0.18, 0.09, 0.03), (0.26, 0.10, -0.03), (0.30, 0.07, 0.05))):
+        m[f"{S}_THI{k + 1}"] = hip + along * thigh_dir + out * side + ahead * thigh_fwd
+        m[f"{S}_SHK{k + 1}"] = knee + along * shank_dir + out * side + ahead * shank_fwd
     m[f"{S}_FCC"] = ank + foot_rot @ np.array([-0.07, 0, -0.05])
     m[f"{S}_FM2"] = ank + foot_rot @ np.array([0.15, 0, -0.06])
     joints[f"toe_{s}"] = m[f"{S}_FM2"]
@@ -125,48 +135,53 @@ def _arm(s: str, sgn: float, ph: float, chest, joints, m) -> None:
     joints[f"hand_{s}"] = m[f"{S}_HM2"]
 
 
-def running_take(seconds: float = 20.0, rate_hz: float = 200.0, seed: int = 0):
-    """-> (Recording in the PAF marker set, true joint centres (F, J, 3) with NaN for joints not placed)."""
+def running_take(seconds: float = 20.0, rate_hz: float = 200.0, seed: int = 0, clusters: bool = False,
+                 swing: str = "running", skin_m: float = 0.002):
+    """-> (Recording in the PAF marker set, true joint centres (F, J, 3) with NaN for joints not placed);
+    ``clusters``: with a cluster of three markers on each thigh and shank (CLUSTERS) after them; ``swing``: how far
+    the legs bend (LEG_SWING); ``skin_m``: the most a marker's skin drifts along each of its three slow waves."""
     from mocap_core.recordings import Recording
 
     rng = np.random.default_rng(seed)
     n = int(seconds * rate_hz)
     t = np.arange(n) / rate_hz
-    pos = np.empty((n, len(LABELS), 3))
+    labels = LABELS + (CLUSTERS if clusters else ())
+    pos = np.empty((n, len(labels), 3))
     truth = np.full((n, N_JOINTS, 3), np.nan)
-    hidden = np.zeros((n, len(LABELS)), bool)
+    hidden = np.zeros((n, len(labels)), bool)
     for f in range(n):
-        joints, markers, behind = _pose(t[f])
-        for k, label in enumerate(LABELS):
+        joints, markers, behind = _pose(t[f], LEG_SWING[swing])
+        for k, label in enumerate(labels):
             pos[f, k] = markers[label]
         for name, p in joints.items():
             truth[f, INDEX[name]] = p
         for S in "LR":
             if behind[S]:
                 hidden[f, LABELS.index(f"{S}_HME")] = True  # the medial elbow is behind the trunk
-    # soft tissue: a smooth drift per marker (three slow sinusoids, 1-2 mm each) plus 0.3 mm noise
-    for k in range(len(LABELS)):
+    # soft tissue: a smooth drift per marker (three slow sinusoids, 1-2 mm each by default) plus 0.3 mm noise
+    for k in range(len(labels)):
         for _ in range(3):
-            amp, freq, ph = rng.uniform(0.001, 0.002, 3), rng.uniform(0.5, 4.0), rng.uniform(0, 2 * np.pi, 3)
+            amp, freq, ph = rng.uniform(skin_m / 2, skin_m, 3), rng.uniform(0.5, 4.0), rng.uniform(0, 2 * np.pi, 3)
             pos[:, k] += amp * np.sin(2 * np.pi * freq * t[:, None] + ph)
     pos += rng.normal(0, 0.0003, pos.shape)
     # random dropouts: about one 0.05-0.3 s gap per marker every 8 s (pelvis markers included)
-    for k in range(len(LABELS)):
+    for k in range(len(labels)):
         for _ in range(rng.poisson(seconds / 8)):
             start = int(rng.integers(0, n))
             hidden[start:start + int(rng.uniform(0.05, 0.3) * rate_hz), k] = True
     pos[hidden] = np.nan
-    rec = Recording(list(LABELS), pos.astype(np.float32), float(rate_hz), f"synthetic:running(seed={seed})",
+    rec = Recording(list(labels), pos.astype(np.float32), float(rate_hz), f"synthetic:running(seed={seed})",
                     meta={"up_axis": "+z"})
     return rec, truth
 
 
 def from_spec(spec: str):
-    """``synthetic:running[?seconds=S&rate=R&seed=N]`` -> Recording."""
+    """``synthetic:running[?seconds=S&rate=R&seed=N&clusters=1&swing=range_of_motion]`` -> Recording."""
     from urllib.parse import parse_qs
 
     kind, _, query = spec.partition(":")[2].partition("?")
     if kind != "running":
         raise ValueError(f"unknown synthetic take {kind!r} (synthetic:running)")
     q = {k: v[0] for k, v in parse_qs(query).items()}
-    return running_take(float(q.get("seconds", 20)), float(q.get("rate", 200)), int(q.get("seed", 0)))[0]
+    return running_take(float(q.get("seconds", 20)), float(q.get("rate", 200)), int(q.get("seed", 0)),
+                        q.get("clusters", "0") not in ("0", ""), q.get("swing", "running"))[0]

@@ -1,6 +1,7 @@
 """The biomechanics protocol on a real take: a static trial (the karate take's stillest second) calibrates the subject,
 a movement trial without the knee, ankle and elbow markers, and a profile without their landmarks, is solved with it
-through the CLI; the static trial's markers ride their body segments' bones."""
+through the CLI; the static trial's markers ride their body segments' bones. On a synthetic one with clusters: knees
+found from a range-of-motion trial's motion."""
 from __future__ import annotations
 
 import csv
@@ -15,9 +16,11 @@ import yaml
 from mocap_core.experiments import localize_take
 from mocap_core.fit.calibration import calibrate, is_static
 from mocap_core.fit.protocol import stillest_second
+from mocap_core.fit.subject import load_subject
 from mocap_core.profiles import PROFILE_DIR, load_profile
 from mocap_core.recordings import Recording, read_recording, write_c3d
 from mocap_core.skeleton import INDEX, JOINTS
+from mocap_core.synthetic import THIGH, running_take
 from tests.conftest import REPO, data_file
 
 ANATOMICAL = {"LKNE", "RKNE", "LANK", "RANK", "LELB", "RELB"}   # the karate set's knee, ankle and elbow markers
@@ -100,7 +103,7 @@ def test_eval_protocol_reports_the_static_trial_and_the_centres(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "protocol.csv")))
     karate = [r for r in rows if r["take"] == "karate"]
     assert {(r["variant"], r["method"], r["subject"]) for r in karate} == {
-        (v, m, s) for v in ("landmarks_off", "clusters", "worst") for m in ("studio_subject", "fit_subject")
+        (v, m, s) for v in ("landmarks_off", "clusters", "worst", "worst_movement") for m in ("studio_subject", "fit_subject")
         for s in ("static", "complete")}
     assert all(float(r["every_joint_pct"]) == 100 for r in karate)
     text = (tmp_path / "protocol.md").read_text()
@@ -115,3 +118,51 @@ def test_calibrate_says_where_the_motion_puts_the_joints(tmp_path):
     assert "a static trial" not in done.stderr
     hips = [line for line in done.stderr.splitlines() if "from motion: hip_l" in line]
     assert hips and re.search(r"it could be \d+ mm off \(at most 20\).*range-of-motion trial", hips[0]), hips
+
+
+def cluster_trial(tmp_path, swing: str):
+    """A synthetic runner with thigh and shank clusters and no knee or ankle markers (a movement trial), its legs
+    bending as in running or through a range-of-motion trial; a profile without the knee and ankle landmarks that
+    lists the clusters under tracking. -> (take, profile path, true joint centres)."""
+    rec, truth = running_take(12, 100, clusters=True, swing=swing, skin_m=0.001)
+    keep = [k for k, x in enumerate(rec.labels) if x[2:] not in ("FLE", "TTC", "FAL")]
+    take = tmp_path / f"{swing}.c3d"
+    write_c3d(Recording([rec.labels[k] for k in keep], rec.positions[:, keep], rec.rate_hz), take)
+    doc = yaml.safe_load((PROFILE_DIR / "paf_running.yaml").read_text())
+    doc["name"] = "paf_clusters"
+    doc["landmarks"] = {lm: v for lm, v in doc["landmarks"].items() if lm[2:] not in ("FLE", "TTC", "FAL")}
+    doc["tracking"] = {f"{s}_{segment}": [f"{s}_{plate}{k}" for k in (1, 2, 3)]
+                       for s in "LR" for segment, plate in (("thigh", "THI"), ("shank", "SHK"))}
+    (tmp_path / "paf_clusters.yaml").write_text(yaml.safe_dump(doc))
+    return take, tmp_path / "paf_clusters.yaml", truth
+
+
+@pytest.mark.timeout(600)
+def test_knees_no_landmark_locates_come_from_a_range_of_motion_trial(tmp_path):
+    """Known answer: calibrated on a range-of-motion trial whose profile has no knee landmarks, the subject has knees
+    where the clusters' motion puts them; a running trial solved with it has them in every frame, near the truth.
+    A running trial alone bends the knees too little for its own clusters' wobble: refused, with the message."""
+    rom, profile, _ = cluster_trial(tmp_path, "range_of_motion")
+    run, _, truth = cluster_trial(tmp_path, "running")
+    done = mocap("calibrate", str(rom), "--profile", str(profile), "-o", str(tmp_path / "rom.yaml"))
+    assert "from motion: knee_l found" in done.stderr and "the subject has it from here" in done.stderr
+    subject = load_subject(tmp_path / "rom.yaml")
+    assert set(subject.from_motion) == {"knee_l", "knee_r"} and subject.known[INDEX["knee_l"]]
+    assert abs(subject.lengths()[INDEX["knee_l"]] - THIGH) < 0.01
+
+    for how in ((), ("--fit",)):
+        out = tmp_path / f"out{len(how)}.csv"
+        mocap("solve", str(run), "--profile", str(profile), "--subject", str(tmp_path / "rom.yaml"), *how,
+              "--allow-missing", "--joints-out", str(out), "--quiet")
+        rows = list(csv.DictReader(open(out)))
+        for j in ("knee_l", "knee_r"):
+            assert all(r[f"{j}.status"] != "missing" for r in rows), (how, j)
+            got = np.array([[float(r[f"{j}.{a}"]) for a in "xyz"] for r in rows])
+            assert np.linalg.norm(got - truth[:, INDEX[j]], axis=1).mean() < 0.01, (how, j)
+    explained = mocap("profile", "explain", "--profile", str(profile), "--subject", str(tmp_path / "rom.yaml")).stdout
+    assert "motion put the joint (no landmark did): knee_l, knee_r" in explained
+
+    done = mocap("calibrate", str(run), "--profile", str(profile), "-o", str(tmp_path / "run.yaml"))
+    knees = [line for line in done.stderr.splitlines() if "from motion: knee_l" in line]
+    assert knees and re.search(r"it could be \d+ mm off \(at most 20\).*range-of-motion trial", knees[0]), knees
+    assert not load_subject(tmp_path / "run.yaml").known[INDEX["knee_l"]]

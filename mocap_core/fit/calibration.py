@@ -54,14 +54,36 @@ def calibrate(markers: np.ndarray, labels: list[str], profile: Profile, rate_hz:
     markers = np.asarray(markers, np.float64)[_spread(len(markers), s.max_frames)]
     landmark_map = profile.resolve(labels)
     loc = Localizer(profile.body).localize(landmark_map.apply(markers))
+    static = is_static(markers)
+    motion = () if static else from_motion(markers, labels, profile, loc.positions, loc.frames, s)
     offsets, known, rest = joint_offsets(loc.positions, loc.frames, s)
-    segments = anatomy(profile, labels) if is_static(markers) else None
+    segments = anatomy(profile, labels) if static else None
     bone, c, spread = marker_offsets(markers, loc.positions, loc.frames, known, s, segments)
     clean = list(profile.columns(labels))
-    subject = Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest)
+    subject = Subject(profile.name, offsets, known, clean, bone, c, spread, len(markers), False, rest, motion)
     for _ in range(s.refinements):
         subject = refine(subject, markers, clean, rate_hz, s, fit_settings, segments)
     return subject
+
+
+def from_motion(markers: np.ndarray, labels: list[str], profile: Profile, P: np.ndarray, R: np.ndarray,
+                s: CalibrationSettings) -> tuple[str, ...]:
+    """The hips, knees and elbows that no landmark locates, put in ``P`` and ``R`` (in place) where the take's motion
+    finds them (mocap_core.fit.functional); their names. Each marker rides the bone its body segment names in the
+    profile (a thigh cluster listed under tracking), else the one it strays least on."""
+    from mocap_core.fit.functional import FUNCTIONAL, locate_from_motion
+
+    wanted = [INDEX[f"{j}_{side}"] for j in FUNCTIONAL for side in "lr"]
+    if np.isfinite(P[:, wanted]).all(axis=2).any(axis=0).all():
+        return ()
+    _, known, _ = joint_offsets(P, R, s)
+    bone = marker_offsets(markers, P, R, known, s)[0]
+    for k, bones in enumerate(profile.marker_bones(labels)):
+        if len(bones) == 1:
+            bone[k] = INDEX[bones[0]]
+    before = np.isfinite(P).all(axis=2).any(axis=0)
+    locate_from_motion(markers, bone, P, R)
+    return tuple(JOINTS[j] for j in np.flatnonzero(np.isfinite(P).all(axis=2).any(axis=0) & ~before))
 
 
 def is_static(markers: np.ndarray) -> bool:

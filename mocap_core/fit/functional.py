@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocap_core.geometry import rigid_fit
+from mocap_core.skeleton import INDEX, PARENT_INDEX
 
 # How far off a functional centre may be, by the fit's own residuals, before it is refused.
 TOLERANCE_M = 0.02
@@ -123,6 +124,7 @@ class Found:
     positions: np.ndarray | None   # (F, 3) the centre in every frame (NaN where the parent is not seen)
     centre: Centre | None
     why: str = ""                  # why it is not to be trusted ("": it is)
+    axes: np.ndarray | None = None  # (F, 3) a hinge's axis in every frame (NaN where the parent is not seen)
 
     def apart_m(self, located: np.ndarray, joint_index: dict[str, int]) -> float:
         """The mean distance (m) from where the landmarks put the joint (``located`` (F, J, 3)); NaN where they never
@@ -166,8 +168,44 @@ def functional_centres(markers: np.ndarray, marker_bone: np.ndarray, joint_index
                 out.append(Found(name, None, None, str(e)))
                 continue
             positions = np.einsum("fab,b->fa", R, c.place) + t
+            axes = np.einsum("fab,b->fa", R, c.axis) if hinge else None
             why = c.why_not(name)
             if not why:
                 found[f"{child}_{side}"] = positions
-            out.append(Found(name, positions, c, why))
+            out.append(Found(name, positions, c, why, axes))
     return out
+
+
+# The bone whose frame says which way is the body's left (its x axis), for the frame of each joint found from motion.
+LEFT_FROM = {"hip": "pelvis", "knee": "pelvis", "elbow": "spine3"}
+
+
+def locate_from_motion(markers: np.ndarray, marker_bone: np.ndarray, positions: np.ndarray,
+                       frames: np.ndarray) -> list[Found]:
+    """Put the hips, knees and elbows that no landmark locates in any frame where the take's motion finds them
+    (``functional_centres``), in place: the joint's position in every frame, and its parent bone's frame where it
+    had none (y along the bone to the joint, x along the hinge's axis towards the body's right, as the landmarks'
+    frames have it). ``positions`` (F, J, 3) and ``frames`` (F, J, 3, 3): what the landmarks located, NaN where
+    not. Returns what was found and, where nothing was, why (``Found.why``)."""
+    found = functional_centres(markers, marker_bone, INDEX, positions)
+    for f in found:
+        j = INDEX[f.joint]
+        if f.why or np.isfinite(positions[:, j]).any():
+            continue
+        positions[:, j] = f.positions
+        if f.axes is None:
+            continue
+        parent = PARENT_INDEX[j]
+        y = _unit(f.positions - positions[:, parent])
+        right = -frames[:, INDEX[LEFT_FROM[f.joint.rsplit("_", 1)[0]]], :, 0]
+        x = f.axes * np.sign(np.einsum("fa,fa->f", f.axes, right))[:, None]
+        x = _unit(x - np.einsum("fa,fa->f", x, y)[:, None] * y)
+        built = np.stack([x, y, np.cross(x, y)], axis=2)
+        unknown = ~np.isfinite(frames[:, parent]).all(axis=(1, 2))
+        frames[unknown, parent] = built[unknown]
+    return found
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)

@@ -4,9 +4,10 @@ without the anatomical markers are solved with it, and the take's motion places 
 From a take with every marker: its stillest second is the static trial (a standing subject sways, so "still" is every
 marker within STILL_M of its mean); the movement trial is the take with the knee, ankle and elbow landmarks' markers
 hidden from 1 s on (``landmarks_off``), with only the pelvis's markers and those no landmark names (``clusters``), or
-with only the pelvis, head, hand and toe markers (``worst``, the thesis's worst case, as ``mocap eval rigid`` hides it).
-Each is solved by the studio stages and by the fit, with the subject from the static trial and, for comparison, from
-the complete take; the knees, ankles and elbows are measured against where the landmarks put them
+with only the pelvis, head, hand and toe markers (``worst``, the thesis's worst case, as ``mocap eval rigid`` hides it),
+and the worst case solved through the profile without the anatomical landmarks, as a movement trial's profile is
+(``worst_movement``). Each is solved by the studio stages and by the fit, with the subject from the static trial and,
+for comparison, from the complete take; the knees, ankles and elbows are measured against where the landmarks put them
 in the complete take.
 """
 from __future__ import annotations
@@ -25,7 +26,7 @@ from mocap_core.skeleton import INDEX
 ANATOMICAL = ("HLE", "HME", "UOA", "FLE", "FME", "PAS", "TTC", "FAL", "TAM")
 MEASURED = tuple(f"{j}_{s}" for j in ("knee", "ankle", "elbow") for s in "lr")
 METHODS = ("studio_subject", "fit_subject")
-VARIANTS = ("landmarks_off", "clusters", "worst")
+VARIANTS = ("landmarks_off", "clusters", "worst", "worst_movement")
 PELVIS = ("SACR", "L_IAS", "R_IAS")
 
 
@@ -43,7 +44,7 @@ def stillest_second(markers: np.ndarray, rate_hz: float) -> tuple[int, float]:
 def movement(markers: np.ndarray, profile: Profile, labels: list[str], variant: str, start: int) -> np.ndarray:
     """The take as a movement trial from ``start`` on: ``landmarks_off`` (the anatomical markers hidden), ``clusters``
     (only the pelvis's and the markers no landmark names: clusters, wands, tracking markers) or ``worst`` (only the
-    pelvis, head, hand and toe markers)."""
+    pelvis, head, hand and toe markers; ``worst_movement`` too)."""
     col = list(profile.columns(labels))
     names = {n: lm for lm in profile.landmarks for n in profile.markers_of(lm)}
     if variant == "landmarks_off":
@@ -56,6 +57,12 @@ def movement(markers: np.ndarray, profile: Profile, labels: list[str], variant: 
     out = markers.copy()
     out[start:, hide] = np.nan
     return out
+
+
+def without_anatomy(profile: Profile) -> Profile:
+    """The profile of a movement trial: without the knee, ankle and elbow landmarks."""
+    keep = {lm: v for lm, v in profile.landmarks.items() if lm.rpartition("_")[2] not in ANATOMICAL}
+    return profile.model_copy(update={"name": f"{profile.name}_movement", "landmarks": keep})
 
 
 def run_protocol(rec: Recording, profile: Profile) -> tuple[list[dict], list[dict]]:
@@ -78,9 +85,10 @@ def run_protocol(rec: Recording, profile: Profile) -> tuple[list[dict], list[dic
     rows = []
     for variant in VARIANTS:
         trial = movement(markers, profile, rec.labels, variant, n)
+        through = without_anatomy(profile) if variant == "worst_movement" else profile
         for method in METHODS:
             for subject_from, subject in (("static", static), ("complete", complete)):
-                pos = solve(method, trial, rec, profile, subject)[0]
+                pos = solve(method, trial, rec, through, subject)[0]
                 row = {"static_s": first / rec.rate_hz, "sway_mm": travel * 1000, "variant": variant,
                        "method": method, "subject": subject_from,
                        "every_joint_pct": float(np.isfinite(pos[:, subject.known]).all(axis=(1, 2)).mean() * 100)}

@@ -16,6 +16,7 @@ bones:                    # joint: its parent and its offset in the parent's fra
 markers:                  # label: its bone, its offset in that bone's frame, its spread there (mm)
   LELB: {bone: shoulder_l, offset: [0.03, 0.28, -0.01], spread_mm: 4.1}
 unassigned: [StartG]      # labels that moved with no bone (props, the floor)
+from_motion: [knee_l]     # joints no landmark located, found from the take's motion (when there are)
 ```
 """
 from __future__ import annotations
@@ -47,6 +48,7 @@ class Subject:
     frames: int = 0
     converged: bool = False
     rest: np.ndarray = field(default=None)  # (J, 3, 3) each bone's typical rotation in its parent's frame
+    from_motion: tuple[str, ...] = ()       # joints no landmark located, found from the take's motion
 
     def __post_init__(self):
         if self.rest is None:
@@ -74,7 +76,8 @@ class Subject:
                    for i, (label, b) in enumerate(zip(self.labels, self.marker_bone)) if b >= 0}
         doc = {"format": FORMAT, "profile": self.profile, "frames": int(self.frames), "converged": bool(self.converged),
                "bones": bones, "markers": markers,
-               "unassigned": [label for label, b in zip(self.labels, self.marker_bone) if b < 0]}
+               "unassigned": [label for label, b in zip(self.labels, self.marker_bone) if b < 0],
+               **({"from_motion": list(self.from_motion)} if self.from_motion else {})}
         Path(path).write_text(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=110))
 
 
@@ -129,4 +132,4 @@ def load_subject(path: str | Path) -> Subject:
         raise SubjectError(f"subject file {path}: needs finite bone offsets and at least one marker")
     return Subject(str(doc.get("profile", "")), offsets, known, labels, np.array(bones, np.int64),
                    np.array(marker_offsets).reshape(-1, 3), np.array(spread), int(doc.get("frames", 0)),
-                   bool(doc.get("converged", False)), rest)
+                   bool(doc.get("converged", False)), rest, tuple(map(str, doc.get("from_motion") or ())))
