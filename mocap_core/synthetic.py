@@ -24,11 +24,16 @@ LABELS = ("SACR", "L_IAS", "R_IAS", "TV12", "TV2", "SME", "SGL", "L_HEAD", "R_HE
           "L_FAL", "L_FCC", "L_FM2",
           "R_SAE", "R_HLE", "R_HME", "R_UOA", "R_RSP", "R_USP", "R_HM2", "R_PAS", "R_FLE", "R_TTC",
           "R_FAL", "R_FCC", "R_FM2")
-# Clusters (the movement trials of a biomechanics protocol): three markers on a plate on each thigh and shank.
-CLUSTERS = tuple(f"{s}_{part}{k}" for s in "LR" for part in ("THI", "SHK") for k in (1, 2, 3))
+# Clusters (the movement trials of a biomechanics protocol): three markers on a plate on each thigh, shank, upper arm
+# and forearm.
+CLUSTERS = tuple(f"{s}_{part}{k}" for s in "LR" for part in ("THI", "SHK", "UAR", "FAR") for k in (1, 2, 3))
 STRIDE_HZ = 1.4
-# Each leg's hip and knee flexion, degrees: (mean, amplitude) over a stride. A range-of-motion trial bends them further.
-LEG_SWING = {"running": ((20, 28), (45, 40)), "range_of_motion": ((25, 50), (70, 65))}
+# Each joint's flexion, degrees: (mean, amplitude) over a stride. A range-of-motion trial bends them further.
+SWING = {"running": {"hip": (20, 28), "knee": (45, 40), "shoulder": (0, -35), "elbow": (90, 15)},
+         "range_of_motion": {"hip": (25, 50), "knee": (70, 65), "shoulder": (0, -60), "elbow": (75, 70)}}
+# A cluster's three markers: (along the segment, out to the side, ahead) in metres.
+PLATE = ((0.18, 0.09, 0.03), (0.26, 0.10, -0.03), (0.30, 0.07, 0.05))
+ARM_PLATE = ((0.14, 0.05, 0.02), (0.19, 0.06, -0.02), (0.22, 0.04, 0.03))
 THIGH, SHANK, UPPER_ARM, FOREARM = 0.44, 0.42, 0.29, 0.26
 
 
@@ -43,8 +48,8 @@ def _down(angle: float) -> np.ndarray:
     return np.array([math.sin(angle), 0.0, -math.cos(angle)])
 
 
-def _pose(t: float, swing=LEG_SWING["running"]):
-    """Joint centres and markers (dicts of name -> 3-vector) at time t; ``swing``: the legs' (LEG_SWING)."""
+def _pose(t: float, swing=SWING["running"]):
+    """Joint centres and markers (dicts of name -> 3-vector) at time t; ``swing``: the joints' (SWING)."""
     w = 2 * math.pi * STRIDE_HZ
     p = np.array([0.0, 0.01 * math.sin(w * t), 0.95 + 0.03 * math.sin(2 * w * t)])   # pelvis centre
     lean = math.radians(8)
@@ -55,7 +60,7 @@ def _pose(t: float, swing=LEG_SWING["running"]):
     for s, S, sgn, phase in (("l", "L", 1.0, 0.0), ("r", "R", -1.0, math.pi)):
         ph = w * t + phase
         _leg(s, sgn, ph, swing, joints, m)
-        _arm(s, sgn, ph, p + 0.53 * up_t, joints, m)
+        _arm(s, sgn, ph, swing, p + 0.53 * up_t, joints, m)
     behind = {s: math.sin(w * t + ph0) > 0.5 for s, ph0 in (("L", 0.0), ("R", math.pi))}  # arm swung back
     return joints, m, behind
 
@@ -88,7 +93,7 @@ def _trunk(p, up_t, joints, m) -> None:
 def _leg(s: str, sgn: float, ph: float, swing, joints, m) -> None:
     """One leg in a running flexion pattern at phase ph."""
     S, side = s.upper(), np.array([0, sgn, 0])
-    (hip_mean, hip_amp), (knee_mean, knee_amp) = swing
+    (hip_mean, hip_amp), (knee_mean, knee_amp) = swing["hip"], swing["knee"]
     hip_flex = math.radians(hip_mean + hip_amp * math.sin(ph))
     knee_flex = math.radians(knee_mean + knee_amp * math.sin(ph - 1.2))
     ankle = math.radians(8 * math.sin(ph + 0.6))
@@ -104,21 +109,26 @@ def _leg(s: str, sgn: float, ph: float, swing, joints, m) -> None:
     m[f"{S}_TTC"] = knee + 0.045 * shank_fwd + 0.07 * shank_dir
     m[f"{S}_PAS"] = knee + 0.05 * shank_fwd - 0.07 * shank_dir
     m[f"{S}_FAL"] = ank + 0.042 * side
-    thigh_dir = (knee - hip) / THIGH
-    thigh_fwd = np.cross(side * sgn, thigh_dir) * -1
-    for k, (along, out, ahead) in enumerate(((0.18, 0.09, 0.03), (0.26, 0.10, -0.03), (0.30, 0.07, 0.05))):
-        m[f"{S}_THI{k + 1}"] = hip + along * thigh_dir + out * side + ahead * thigh_fwd
-        m[f"{S}_SHK{k + 1}"] = knee + along * shank_dir + out * side + ahead * shank_fwd
+    _plate(m, f"{S}_THI", hip, (knee - hip) / THIGH, side, PLATE)
+    _plate(m, f"{S}_SHK", knee, shank_dir, side, PLATE)
     m[f"{S}_FCC"] = ank + foot_rot @ np.array([-0.07, 0, -0.05])
     m[f"{S}_FM2"] = ank + foot_rot @ np.array([0.15, 0, -0.06])
     joints[f"toe_{s}"] = m[f"{S}_FM2"]
 
 
-def _arm(s: str, sgn: float, ph: float, chest, joints, m) -> None:
+def _plate(m, name: str, origin, along, side, plate) -> None:
+    """A cluster's markers on a segment from ``origin`` along the unit vector ``along``."""
+    ahead = np.cross(along, np.abs(side))  # forward, perpendicular to the segment
+    for k, (a, out, fwd) in enumerate(plate):
+        m[f"{name}{k + 1}"] = origin + a * along + out * side + fwd * ahead
+
+
+def _arm(s: str, sgn: float, ph: float, swing, chest, joints, m) -> None:
     """One arm swinging opposite to the same side's leg, elbow bent; ``chest``: the trunk at shoulder height."""
     S, side = s.upper(), np.array([0, sgn, 0])
-    sh_flex = math.radians(-35 * math.sin(ph))
-    el_flex = math.radians(90 + 15 * math.sin(ph + 0.5))
+    (sh_mean, sh_amp), (el_mean, el_amp) = swing["shoulder"], swing["elbow"]
+    sh_flex = math.radians(sh_mean + sh_amp * math.sin(ph))
+    el_flex = math.radians(el_mean + el_amp * math.sin(ph + 0.5))
     sae = chest + np.array([-0.02, sgn * 0.19, 0])
     shoulder = sae + np.array([0, -sgn * 0.01, -0.05])
     elbow = shoulder + UPPER_ARM * _down(sh_flex)
@@ -133,13 +143,15 @@ def _arm(s: str, sgn: float, ph: float, chest, joints, m) -> None:
     m[f"{S}_RSP"], m[f"{S}_USP"] = wrist + 0.025 * radial, wrist - 0.025 * radial
     m[f"{S}_HM2"] = wrist + 0.08 * fore
     joints[f"hand_{s}"] = m[f"{S}_HM2"]
+    _plate(m, f"{S}_UAR", shoulder, (elbow - shoulder) / UPPER_ARM, side, ARM_PLATE)
+    _plate(m, f"{S}_FAR", elbow, fore, side, ARM_PLATE)
 
 
 def running_take(seconds: float = 20.0, rate_hz: float = 200.0, seed: int = 0, clusters: bool = False,
                  swing: str = "running", skin_m: float = 0.002):
     """-> (Recording in the PAF marker set, true joint centres (F, J, 3) with NaN for joints not placed);
-    ``clusters``: with a cluster of three markers on each thigh and shank (CLUSTERS) after them; ``swing``: how far
-    the legs bend (LEG_SWING); ``skin_m``: the most a marker's skin drifts along each of its three slow waves."""
+    ``clusters``: with a cluster of three markers on each thigh, shank, upper arm and forearm (CLUSTERS) after them;
+    ``swing``: how far the joints bend (SWING); ``skin_m``: the most a marker's skin drifts along each of its three slow waves."""
     from mocap_core.recordings import Recording
 
     rng = np.random.default_rng(seed)
@@ -150,7 +162,7 @@ def running_take(seconds: float = 20.0, rate_hz: float = 200.0, seed: int = 0, c
     truth = np.full((n, N_JOINTS, 3), np.nan)
     hidden = np.zeros((n, len(labels)), bool)
     for f in range(n):
-        joints, markers, behind = _pose(t[f], LEG_SWING[swing])
+        joints, markers, behind = _pose(t[f], SWING[swing])
         for k, label in enumerate(labels):
             pos[f, k] = markers[label]
         for name, p in joints.items():

@@ -20,7 +20,7 @@ from mocap_core.fit.subject import load_subject
 from mocap_core.profiles import PROFILE_DIR, load_profile
 from mocap_core.recordings import Recording, read_recording, write_c3d
 from mocap_core.skeleton import INDEX, JOINTS
-from mocap_core.synthetic import THIGH, running_take
+from mocap_core.synthetic import THIGH, UPPER_ARM, running_take
 from tests.conftest import REPO, data_file
 
 ANATOMICAL = {"LKNE", "RKNE", "LANK", "RANK", "LELB", "RELB"}   # the karate set's knee, ankle and elbow markers
@@ -121,46 +121,54 @@ def test_calibrate_says_where_the_motion_puts_the_joints(tmp_path):
 
 
 def cluster_trial(tmp_path, swing: str):
-    """A synthetic runner with thigh and shank clusters and no knee or ankle markers (a movement trial), its legs
-    bending as in running or through a range-of-motion trial; a profile without the knee and ankle landmarks that
-    lists the clusters under tracking. -> (take, profile path, true joint centres)."""
+    """A synthetic runner with thigh, shank, upper arm and forearm clusters and no knee, ankle or elbow markers (a
+    movement trial), its joints bending as in running or through a range-of-motion trial; a profile without the knee,
+    ankle and elbow landmarks that lists the clusters under tracking. -> (take, profile path, true joint centres)."""
     rec, truth = running_take(12, 100, clusters=True, swing=swing, skin_m=0.001)
-    keep = [k for k, x in enumerate(rec.labels) if x[2:] not in ("FLE", "TTC", "FAL")]
+    keep = [k for k, x in enumerate(rec.labels) if x[2:] not in GONE]
     take = tmp_path / f"{swing}.c3d"
     write_c3d(Recording([rec.labels[k] for k in keep], rec.positions[:, keep], rec.rate_hz), take)
     doc = yaml.safe_load((PROFILE_DIR / "paf_running.yaml").read_text())
     doc["name"] = "paf_clusters"
-    doc["landmarks"] = {lm: v for lm, v in doc["landmarks"].items() if lm[2:] not in ("FLE", "TTC", "FAL")}
-    doc["tracking"] = {f"{s}_{segment}": [f"{s}_{plate}{k}" for k in (1, 2, 3)]
-                       for s in "LR" for segment, plate in (("thigh", "THI"), ("shank", "SHK"))}
+    doc["landmarks"] = {lm: v for lm, v in doc["landmarks"].items() if lm[2:] not in GONE}
+    doc["tracking"] = {f"{s}_{segment}": [f"{s}_{plate}{k}" for k in (1, 2, 3)] for s in "LR"
+                       for segment, plate in (("thigh", "THI"), ("shank", "SHK"), ("upper_arm", "UAR"),
+                                              ("forearm", "FAR"))}
     (tmp_path / "paf_clusters.yaml").write_text(yaml.safe_dump(doc))
     return take, tmp_path / "paf_clusters.yaml", truth
 
 
+GONE = ("FLE", "TTC", "FAL", "HLE", "HME", "UOA")   # the PAF set's knee, ankle and elbow markers
+FROM_MOTION = ("knee_l", "knee_r", "elbow_l", "elbow_r")
+
+
 @pytest.mark.timeout(600)
-def test_knees_no_landmark_locates_come_from_a_range_of_motion_trial(tmp_path):
-    """Known answer: calibrated on a range-of-motion trial whose profile has no knee landmarks, the subject has knees
-    where the clusters' motion puts them; a running trial solved with it has them in every frame, near the truth.
-    A running trial alone bends the knees too little for its own clusters' wobble: refused, with the message."""
+def test_knees_and_elbows_no_landmark_locates_come_from_a_range_of_motion_trial(tmp_path):
+    """Known answer: calibrated on a range-of-motion trial whose profile has no knee or elbow landmarks, the subject
+    has knees and elbows where the clusters' motion puts them (and so the forearm down to the hand); a running trial
+    solved with it has them in every frame, near the truth. A running trial alone bends the knees too little for its
+    own clusters' wobble: refused, with the message."""
     rom, profile, _ = cluster_trial(tmp_path, "range_of_motion")
     run, _, truth = cluster_trial(tmp_path, "running")
     done = mocap("calibrate", str(rom), "--profile", str(profile), "-o", str(tmp_path / "rom.yaml"))
     assert "from motion: knee_l found" in done.stderr and "the subject has it from here" in done.stderr
     subject = load_subject(tmp_path / "rom.yaml")
-    assert set(subject.from_motion) == {"knee_l", "knee_r"} and subject.known[INDEX["knee_l"]]
-    assert abs(subject.lengths()[INDEX["knee_l"]] - THIGH) < 0.01
+    assert set(subject.from_motion) == set(FROM_MOTION)
+    assert subject.known[[INDEX[j] for j in (*FROM_MOTION, "wrist_l", "hand_r")]].all()
+    lengths = subject.lengths()
+    assert abs(lengths[INDEX["knee_l"]] - THIGH) < 0.01 and abs(lengths[INDEX["elbow_l"]] - UPPER_ARM) < 0.01
 
     for how in ((), ("--fit",)):
         out = tmp_path / f"out{len(how)}.csv"
         mocap("solve", str(run), "--profile", str(profile), "--subject", str(tmp_path / "rom.yaml"), *how,
               "--allow-missing", "--joints-out", str(out), "--quiet")
         rows = list(csv.DictReader(open(out)))
-        for j in ("knee_l", "knee_r"):
+        for j in FROM_MOTION:
             assert all(r[f"{j}.status"] != "missing" for r in rows), (how, j)
             got = np.array([[float(r[f"{j}.{a}"]) for a in "xyz"] for r in rows])
             assert np.linalg.norm(got - truth[:, INDEX[j]], axis=1).mean() < 0.01, (how, j)
     explained = mocap("profile", "explain", "--profile", str(profile), "--subject", str(tmp_path / "rom.yaml")).stdout
-    assert "motion put the joint (no landmark did): knee_l, knee_r" in explained
+    assert "motion put the joint (no landmark did): elbow_l, elbow_r, knee_l" in explained
 
     done = mocap("calibrate", str(run), "--profile", str(profile), "-o", str(tmp_path / "run.yaml"))
     knees = [line for line in done.stderr.splitlines() if "from motion: knee_l" in line]

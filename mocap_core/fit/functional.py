@@ -178,15 +178,17 @@ def functional_centres(markers: np.ndarray, marker_bone: np.ndarray, joint_index
 
 # The bone whose frame says which way is the body's left (its x axis), for the frame of each joint found from motion.
 LEFT_FROM = {"hip": "pelvis", "knee": "pelvis", "elbow": "spine3"}
+CHILDREN = [np.flatnonzero(PARENT_INDEX == j) for j in range(len(PARENT_INDEX))]
 
 
 def locate_from_motion(markers: np.ndarray, marker_bone: np.ndarray, positions: np.ndarray,
                        frames: np.ndarray) -> list[Found]:
     """Put the hips, knees and elbows that no landmark locates in any frame where the take's motion finds them
-    (``functional_centres``), in place: the joint's position in every frame, and its parent bone's frame where it
-    had none (y along the bone to the joint, x along the hinge's axis towards the body's right, as the landmarks'
-    frames have it). ``positions`` (F, J, 3) and ``frames`` (F, J, 3, 3): what the landmarks located, NaN where
-    not. Returns what was found and, where nothing was, why (``Found.why``)."""
+    (``functional_centres``), in place: the joint's position in every frame, and the frames of the bones on either
+    side of a hinge where they had none (y along the bone, x along the hinge's axis towards the body's right, as the
+    landmarks' frames have it): the parent's, and the joint's own where its child is located (a wrist, an ankle).
+    ``positions`` (F, J, 3) and ``frames`` (F, J, 3, 3): what the landmarks located, NaN where not. Returns what was
+    found and, where nothing was, why (``Found.why``)."""
     found = functional_centres(markers, marker_bone, INDEX, positions)
     for f in found:
         j = INDEX[f.joint]
@@ -195,14 +197,13 @@ def locate_from_motion(markers: np.ndarray, marker_bone: np.ndarray, positions: 
         positions[:, j] = f.positions
         if f.axes is None:
             continue
-        parent = PARENT_INDEX[j]
-        y = _unit(f.positions - positions[:, parent])
         right = -frames[:, INDEX[LEFT_FROM[f.joint.rsplit("_", 1)[0]]], :, 0]
-        x = f.axes * np.sign(np.einsum("fa,fa->f", f.axes, right))[:, None]
-        x = _unit(x - np.einsum("fa,fa->f", x, y)[:, None] * y)
-        built = np.stack([x, y, np.cross(x, y)], axis=2)
-        unknown = ~np.isfinite(frames[:, parent]).all(axis=(1, 2))
-        frames[unknown, parent] = built[unknown]
+        axis = f.axes * np.sign(np.einsum("fa,fa->f", f.axes, right))[:, None]
+        for bone, end in [(PARENT_INDEX[j], j), *((j, c) for c in CHILDREN[j])]:
+            y = _unit(positions[:, end] - positions[:, bone])
+            x = _unit(axis - np.einsum("fa,fa->f", axis, y)[:, None] * y)
+            unknown = ~np.isfinite(frames[:, bone]).all(axis=(1, 2))
+            frames[unknown, bone] = np.stack([x, y, np.cross(x, y)], axis=2)[unknown]
     return found
 
 
