@@ -105,19 +105,35 @@ def test_the_graph_fits_each_limb_to_a_subjects_markers_as_the_offline_solve_doe
     assert np.nanmax(np.abs(offline[False] - offline[True])) > 0.01  # (the markers moved the limbs)
 
 
+def solved_with_subject(tmp_path, take, profile, subject, frames: int) -> list:
+    """The card's graph on ``take`` through ``profile``, each IK node with ``subject``: its skeleton/solved messages."""
+    from messages import decode
+    from nodes.bags import read_bag
+    from tests.conftest import pipeline_graph
+
+    bag = tmp_path / "solved.mcap"
+    source = f"{{path: {take}, max_frames: {frames}, lockstep_topic: skeleton/solved, lockstep_timeout_s: 30}}"
+    graph = pipeline_graph(source, profile=str(profile),
+                           extra=f"  - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [skeleton/solved]}}}}",
+                           retarget="{max_wait_ms: 5000}")
+    for limb in ("torso", "left_arm", "right_arm", "left_leg", "right_leg"):
+        graph = graph.replace(f"{{limb: {limb}}}", f"{{limb: {limb}, subject: {subject}}}")
+    with launched(tmp_path, graph, "--until-done") as g:
+        g.proc.wait(timeout=180)
+        assert g.proc.returncode == 0, g.log()
+    solved = [decode(x.data, x.topic) for x in read_bag(bag, ["skeleton/solved"])]
+    assert len(solved) == frames
+    return solved
+
+
 def test_the_graph_solves_a_movement_trial_with_a_static_trials_subject(tmp_path):
     """The biomechanics protocol live: a subject from the karate take's still second, then the card's graph on the
     take without its knee, ankle and elbow markers, through a profile without their landmarks: every joint in every
     frame (the subject's markers place what no landmark does)."""
-    import yaml
     from mocap_core.fit.calibration import calibrate
     from mocap_core.fit.protocol import stillest_second
     from mocap_core.profiles import PROFILE_DIR, load_profile
     from mocap_core.recordings import read_recording, write_c3d
-    from mocap_core.skeleton import Status
-    from messages import decode
-    from nodes.bags import read_bag
-    from tests.conftest import pipeline_graph
     from tests.test_protocol import ANATOMICAL
 
     rec = read_recording(data_file("08_cmu_135_02_karate_kata.c3d"))
@@ -131,16 +147,28 @@ def test_the_graph_solves_a_movement_trial_with_a_static_trials_subject(tmp_path
     doc = yaml.safe_load((PROFILE_DIR / "cmu41.yaml").read_text())
     doc["landmarks"] = {lm: v for lm, v in doc["landmarks"].items() if v not in ANATOMICAL}
     (tmp_path / "clusters.yaml").write_text(yaml.safe_dump({**doc, "name": "clusters"}))
-    bag = tmp_path / "solved.mcap"
-    source = f"{{path: {take}, max_frames: {frames}, lockstep_topic: skeleton/solved, lockstep_timeout_s: 30}}"
-    graph = pipeline_graph(source, profile=str(tmp_path / "clusters.yaml"),
-                           extra=f"  - {{id: rec, kind: recorder, params: {{path: {bag}, topics: [skeleton/solved]}}}}",
-                           retarget="{max_wait_ms: 5000}")
-    for limb in ("torso", "left_arm", "right_arm", "left_leg", "right_leg"):
-        graph = graph.replace(f"{{limb: {limb}}}", f"{{limb: {limb}, subject: {tmp_path / 'actor.yaml'}}}")
-    with launched(tmp_path, graph, "--until-done") as g:
-        g.proc.wait(timeout=180)
-        assert g.proc.returncode == 0, g.log()
-    solved = [decode(x.data, x.topic) for x in read_bag(bag, ["skeleton/solved"])]
-    assert len(solved) == frames
+    solved = solved_with_subject(tmp_path, take, tmp_path / "clusters.yaml", tmp_path / "actor.yaml", frames)
     assert all((np.asarray(m.status) != Status.MISSING).all() for m in solved), "a joint missing in some frame"
+
+
+def test_the_graph_solves_knees_and_elbows_found_from_motion(tmp_path):
+    """A subject whose knees and elbows a range-of-motion trial's motion put (no landmark does), then the card's graph
+    on a running trial: those joints in every frame, near the synthetic runner's true centres."""
+    from mocap_core.fit.calibration import calibrate
+    from mocap_core.profiles import load_profile
+    from mocap_core.recordings import read_recording
+    from mocap_core.skeleton import INDEX
+    from tests.test_protocol import FROM_MOTION, cluster_trial
+
+    rom, profile, _ = cluster_trial(tmp_path, "range_of_motion")
+    run, _, truth = cluster_trial(tmp_path, "running")
+    rec = read_recording(rom)
+    subject = calibrate(rec.positions, rec.labels, load_profile(profile), rec.rate_hz)
+    assert set(subject.from_motion) == set(FROM_MOTION)
+    subject.save(tmp_path / "actor.yaml")
+    frames = 150
+    solved = solved_with_subject(tmp_path, run, profile, tmp_path / "actor.yaml", frames)
+    joints = [INDEX[j] for j in FROM_MOTION]
+    for m in solved:
+        assert (np.asarray(m.status)[joints] != Status.MISSING).all(), m.header.frame
+        assert np.linalg.norm(m.positions[joints] - truth[m.header.frame, joints], axis=1).max() < 0.03
