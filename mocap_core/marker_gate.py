@@ -13,6 +13,7 @@ cannot corrupt what they learn for the rest of the session.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,27 +42,29 @@ class MarkerGate:
             self.last, self.last_t = np.full((m, 3), np.nan), np.full(m, np.nan)
             self.rejected, self.rejected_t = np.full((m, 3), np.nan), np.full(m, np.nan)
         seen = np.isfinite(x).all(axis=1)
-        if np.isfinite(self.last_time_s):
+        if math.isfinite(self.last_time_s):
             if time_s > self.last_time_s:
                 self.frame_s = min(time_s - self.last_time_s, 1.0)
             else:  # (no time, or at or before the last frame's: one interval on)
                 time_s = self.last_time_s + self.frame_s
-        elif not np.isfinite(time_s):
+        elif not math.isfinite(time_s):
             time_s = 0.0
         self.last_time_s = time_s
         with np.errstate(invalid="ignore", over="ignore"):
             bad = seen & ~(np.abs(x) <= self.max_distance_m).all(axis=1)
             near = seen & ~bad
             if (near & ~np.isfinite(self.last_t)).any() and near.sum() >= 3:  # (only a new marker needs the body)
-                near &= np.linalg.norm(x - np.median(x[near], axis=0), axis=1) <= self.max_body_m
+                near &= _norm(x - np.median(x[near], axis=0)) <= self.max_body_m
             fast = seen & ~bad & ~self._reachable(x, self.last, self.last_t, time_s, near)
-            fast &= ~self._reachable(x, self.rejected, self.rejected_t, time_s, False)  # not a track going on
+            if fast.any():  # (most frames have none: the check against the rejected places is for them)
+                fast &= ~self._reachable(x, self.rejected, self.rejected_t, time_s, False)  # not a track going on
+                self.rejected[fast], self.rejected_t[fast] = x[fast], time_s
         drop = bad | fast
-        self.rejected[fast], self.rejected_t[fast] = x[fast], time_s
         keep = seen & ~drop
         self.last[keep], self.last_t[keep] = x[keep], time_s
-        x[drop] = np.nan
-        self.dropped += int(drop.sum())
+        if drop.any():
+            x[drop] = np.nan
+            self.dropped += int(drop.sum())
         return x, drop
 
     def filter_take(self, markers: np.ndarray, frame_s: float, start: int = 0) -> np.ndarray:
@@ -74,6 +77,10 @@ class MarkerGate:
     def _reachable(self, x, before, before_t, time_s, unknown) -> np.ndarray:
         """Markers within max speed of where they were at ``before_t``; ``unknown`` (bool, or per marker) for those
         with no such place."""
-        step = np.linalg.norm(x - before, axis=1)
-        ok = step <= self.max_speed_m_s * (time_s - before_t)
+        ok = _norm(x - before) <= self.max_speed_m_s * (time_s - before_t)
         return np.where(np.isfinite(before_t), ok, unknown)
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Each row's length, as np.linalg.norm(v, axis=1) computes it, without its checks (a few us a call)."""
+    return np.sqrt((v * v).sum(axis=1))
