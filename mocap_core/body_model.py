@@ -96,10 +96,11 @@ class BodyModel:
     def predict(self, positions, frames, status, frame_s: float) -> tuple[np.ndarray, float]:
         """(where the model puts the joint, world; the weight of its turn), or (NaNs, 0) without a model.
         ``frame_s``: seconds since the frame before (the point's speed is capped)."""
-        none = np.full(3, np.nan), 0.0
         k, idx = self.k, self.idx
-        if status[idx[k]] != MISSING:
+        none = np.full(3, np.nan), 0.0
+        if status[idx[k]] != MISSING:  # (so not lost: the frame does not ask the model)
             self.last_local[:] = np.nan
+            return none
         if not self.lost(status) or self.n[0] < MIN_SAMPLES:
             return none
         if self.n[0] - self.fitted_at >= REFIT_SAMPLES or self.fitted_at < 0:

@@ -88,6 +88,7 @@ class LimbFiller:
         self.chain = (self.joints, self.parent_of_root)
         self.last = (self.prev_pos, self.prev_frames, self.prev_parent_frame, self.has_prev, self.lengths)
         self.seen = np.zeros(n, bool)    # joints located at least once
+        self.all_seen = False
         self.chain_end = n               # the limb's joints up to its last one ever located
         self._chain = None               # and what the kernel takes of them (_chain_up_to)
         self.clock = FrameClock(DEFAULT_FRAME_S)  # the frames' interval, from their times
@@ -131,15 +132,18 @@ class LimbFiller:
             before(frame)
         # a limb ends at its last joint ever located: a marker set without hand markers has arms that end at the
         # wrist (the hand, never seen, would keep the limb from ever being whole, and so from ever being filled)
-        self.seen |= status[idx] == LOCATED
-        n = int(np.flatnonzero(self.seen)[-1]) + 1 if self.seen.any() else len(idx)
-        if n != self.chain_end or self._chain is None:  # a joint seen for the first time: the limb is whole again
-            self.chain_end, self.has_prev[0] = n, False        # only once it is seen
-            self._chain = self._chain_up_to(n)
+        if not self.all_seen:  # (once every joint has been, the limb ends at its last for good)
+            self.seen |= status[idx] == LOCATED
+            self.all_seen = bool(self.seen.all())
+            n = int(np.flatnonzero(self.seen)[-1]) + 1 if self.seen.any() else len(idx)
+            if n != self.chain_end or self._chain is None:  # a joint seen for the first time: the limb is whole
+                self.chain_end, self.has_prev[0] = n, False        # again only once it is seen
+                self._chain = self._chain_up_to(n)
         out = frame.out
         _fill_limb(frame.skeleton, *self._chain, self.solver.kernel_id, self._params, out)
-        never = idx[n:]  # joints never located (the carries would hold them from nothing)
-        positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
+        if self.chain_end < len(idx):
+            never = idx[self.chain_end:]  # joints never located (the carries would hold them from nothing)
+            positions[never], frames[never], status[never] = np.nan, np.nan, MISSING
         for after in self._after:
             after(frame)
         took_us = (time.perf_counter() - t0) * 1e6
