@@ -77,13 +77,7 @@ def from_motion(markers: np.ndarray, labels: list[str], profile: Profile, P: np.
     if np.isfinite(P[:, wanted]).all(axis=2).any(axis=0).all():
         return ()
     _, known, _ = joint_offsets(P, R, s)
-    bone = marker_offsets(markers, P, R, known, s)[0]
-    for k, bones in enumerate(profile.marker_bones(labels)):
-        if len(bones) == 1:
-            bone[k] = INDEX[bones[0]]
-    before = np.isfinite(P).all(axis=2).any(axis=0)
-    locate_from_motion(markers, bone, P, R)
-    return tuple(JOINTS[j] for j in np.flatnonzero(np.isfinite(P).all(axis=2).any(axis=0) & ~before))
+    return locate_from_motion(markers, by_segment(profile, labels, marker_offsets(markers, P, R, known, s)[0]), P, R)
 
 
 def is_static(markers: np.ndarray) -> bool:
@@ -114,11 +108,15 @@ def bone_of_each(profile: Profile, labels: list[str], subject: Subject) -> np.nd
     """(M,) the bone each of ``labels`` rides: its body segment's where the profile names one bone for it, else the
     subject's (-1: none)."""
     rows = subject.marker_index(list(profile.columns(labels)))
-    out = np.where(rows >= 0, subject.marker_bone[np.maximum(rows, 0)], -1)
+    return by_segment(profile, labels, np.where(rows >= 0, subject.marker_bone[np.maximum(rows, 0)], -1))
+
+
+def by_segment(profile: Profile, labels: list[str], bone: np.ndarray) -> np.ndarray:
+    """``bone`` (M,) with each marker whose body segment the profile names one bone for on that bone (in place)."""
     for k, bones in enumerate(profile.marker_bones(labels)):
         if len(bones) == 1:
-            out[k] = INDEX[bones[0]]
-    return out
+            bone[k] = INDEX[bones[0]]
+    return bone
 
 
 def calibrate_bones(P: np.ndarray, R: np.ndarray, name: str, settings: CalibrationSettings | None = None) -> Subject:

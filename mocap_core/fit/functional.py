@@ -182,19 +182,20 @@ CHILDREN = [np.flatnonzero(PARENT_INDEX == j) for j in range(len(PARENT_INDEX))]
 
 
 def locate_from_motion(markers: np.ndarray, marker_bone: np.ndarray, positions: np.ndarray,
-                       frames: np.ndarray) -> list[Found]:
+                       frames: np.ndarray) -> tuple[str, ...]:
     """Put the hips, knees and elbows that no landmark locates in any frame where the take's motion finds them
     (``functional_centres``), in place: the joint's position in every frame, and the frames of the bones on either
     side of a hinge where they had none (y along the bone, x along the hinge's axis towards the body's right, as the
     landmarks' frames have it): the parent's, and the joint's own where its child is located (a wrist, an ankle).
-    ``positions`` (F, J, 3) and ``frames`` (F, J, 3, 3): what the landmarks located, NaN where not. Returns what was
-    found and, where nothing was, why (``Found.why``)."""
-    found = functional_centres(markers, marker_bone, INDEX, positions)
-    for f in found:
+    ``positions`` (F, J, 3) and ``frames`` (F, J, 3, 3): what the landmarks located, NaN where not. Returns the
+    joints it put."""
+    placed = []
+    for f in functional_centres(markers, marker_bone, INDEX, positions):
         j = INDEX[f.joint]
         if f.why or np.isfinite(positions[:, j]).any():
             continue
         positions[:, j] = f.positions
+        placed.append(f.joint)
         if f.axes is None:
             continue
         right = -frames[:, INDEX[LEFT_FROM[f.joint.rsplit("_", 1)[0]]], :, 0]
@@ -204,7 +205,7 @@ def locate_from_motion(markers: np.ndarray, marker_bone: np.ndarray, positions: 
             x = _unit(axis - np.einsum("fa,fa->f", axis, y)[:, None] * y)
             unknown = ~np.isfinite(frames[:, bone]).all(axis=(1, 2))
             frames[unknown, bone] = np.stack([x, y, np.cross(x, y)], axis=2)[unknown]
-    return found
+    return tuple(sorted(placed, key=INDEX.get))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

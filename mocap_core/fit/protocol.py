@@ -36,8 +36,8 @@ def stillest_second(markers: np.ndarray, rate_hz: float) -> tuple[int, float]:
     best = (-1, np.inf)
     for start in range(0, len(markers) - n + 1, max(1, n // 10)):
         window = markers[start:start + n]
-        if np.isfinite(window).all() and sway(window) < best[1]:
-            best = (start, sway(window))
+        if np.isfinite(window).all():
+            best = min(best, (start, sway(window)), key=lambda b: b[1])
     return best
 
 
