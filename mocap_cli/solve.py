@@ -169,12 +169,11 @@ def _write(args, rec, profile, chunks, started: float) -> int:
     with tqdm(total=rec.n_frames, unit="frame", disable=args.quiet,
               desc=f"solving {rec.source.split('/')[-1]}") as bar:
         for chunk in chunks:
-            for k in range(len(chunk.positions)):
-                f = chunk.start + k
-                if out:
-                    out.write(rec.first_frame + f, times[f], chunk.positions[k], chunk.status[k])
-                if bvh:
-                    bvh.add(chunk.positions[k], chunk.frames[k])
+            at = np.arange(chunk.start, chunk.start + len(chunk.positions))
+            if out:
+                out.write_frames(rec.first_frame + at, times[at], chunk.positions, chunk.status)
+            if bvh:
+                bvh.add_frames(chunk.positions, chunk.frames)
             for s in Status:
                 counts[s] += int((chunk.status == s).sum())
             missing += (chunk.status == Status.MISSING).sum(axis=0)

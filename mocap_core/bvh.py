@@ -89,7 +89,8 @@ class BvhWriter:
         t_pos = t_pose_positions() @ FACE_PLUS_Z.T
         # the model's bone in its parent's frame, for bones the take never shows
         self.model_local = np.einsum("jki,jk->ji", self.rest[_PARENT], t_pos - t_pos[_PARENT])
-        self.samples: list[np.ndarray] = []            # per frame: each joint's place in its parent's frame
+        self.samples: list[np.ndarray] = []            # (F, J, 3) each joint's place in its parent's frame
+        self.n_samples = 0
         self.rows: list[str] = []                      # not yet on disk
         self.frames = 0                                # rows on disk and pending
         self.flush_rows = max(1, int(round(flush_s * rate_hz)))
@@ -102,28 +103,39 @@ class BvhWriter:
 
     def add(self, positions: np.ndarray, frames: np.ndarray) -> None:
         """One frame of the skeleton model (source world): positions (J, 3), bone frames (J, 3, 3)."""
+        self.add_frames(positions[None], frames[None])
+
+    def add_frames(self, positions: np.ndarray, frames: np.ndarray) -> None:
+        """Frames of the skeleton model (source world): positions (F, J, 3), bone frames (F, J, 3, 3)."""
         p = positions @ self.a.T
         f = self.a @ frames
-        ok_p = np.isfinite(p).all(axis=1)
-        ok_f = np.isfinite(f).all(axis=(1, 2))
-        if len(self.samples) < MAX_SAMPLES:
-            local = np.einsum("jki,jk->ji", f[_PARENT], p - p[_PARENT])
-            local[~(ok_p & ok_p[_PARENT] & ok_f[_PARENT])] = np.nan
+        ok_p = np.isfinite(p).all(axis=2)
+        ok_f = np.isfinite(f).all(axis=(2, 3))
+        room = max(0, MAX_SAMPLES - self.n_samples)
+        if room:
+            local = np.einsum("fjki,fjk->fji", f[:room, _PARENT], p[:room] - p[:room, _PARENT])
+            local[~(ok_p & ok_p[:, _PARENT] & ok_f[:, _PARENT])[:room]] = np.nan
             self.samples.append(local)
+            self.n_samples += len(local)
         world = f @ np.transpose(self.rest, (0, 2, 1))    # rotation from the T-pose, as the rig's
-        rel = np.einsum("jki,jkl->jil", world[_PARENT], world)
-        rel[0] = world[0]
-        ok = ok_f & ok_f[_PARENT]
-        ok[0] = ok_f[0]
-        self.last_local = np.where(ok[:, None, None], rel, self.last_local)
-        if ok_p[0]:
-            self.last_root = p[0]
+        rel = np.einsum("fjki,fjkl->fjil", world[:, _PARENT], world)
+        rel[:, 0] = world[:, 0]
+        ok = ok_f & ok_f[:, _PARENT]
+        ok[:, 0] = ok_f[:, 0]
+        local_moving = np.empty((len(p), len(MOVING), 3, 3))
+        roots = np.empty((len(p), 3))
+        for k in range(len(p)):  # (each frame keeps the last known rotation of a joint it lacks)
+            self.last_local = np.where(ok[k, :, None, None], rel[k], self.last_local)
+            if ok_p[k, 0]:
+                self.last_root = p[k, 0]
+            local_moving[k], roots[k] = self.last_local[MOVING], self.last_root
         with warnings.catch_warnings():  # at gimbal lock scipy picks one of the equal answers, and says so
             warnings.simplefilter("ignore", UserWarning)
-            euler = Rotation.from_matrix(self.last_local[MOVING]).as_euler("ZXY", degrees=True)
-        values = np.concatenate([self.last_root, euler.ravel()])
-        self.rows.append(" ".join(f"{v:.6f}" for v in values))
-        self.frames += 1
+            euler = Rotation.from_matrix(local_moving.reshape(-1, 3, 3)).as_euler("ZXY", degrees=True)
+        values = np.concatenate([roots, euler.reshape(len(p), -1)], axis=1)
+        row = " ".join(["%.6f"] * values.shape[1])
+        self.rows.extend(row % tuple(v) for v in values.tolist())
+        self.frames += len(p)
         if len(self.rows) >= self.flush_rows:
             self.flush()
 
@@ -143,7 +155,7 @@ class BvhWriter:
         """Each joint's OFFSET (J, 3): its median place in its parent's frame, turned into the T-pose."""
         local = self.model_local.copy()
         if self.samples:
-            stack = np.array(self.samples)
+            stack = np.concatenate(self.samples)
             seen = np.isfinite(stack[..., 0]).any(axis=0)
             if seen.any():
                 local[seen] = np.nanmedian(stack[:, seen], axis=0)

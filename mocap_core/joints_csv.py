@@ -31,13 +31,19 @@ class JointsCsvWriter:
         self.writer.writerow(header())
 
     def write(self, frame: int, time_s: float, positions: np.ndarray, status: np.ndarray) -> None:
-        row = [frame, f"{time_s:.6f}"]
-        for p, s in zip(positions, status):
-            if s == 0 or np.isnan(p).any():
-                row += ["", "", "", "missing"]
-            else:
-                row += [f"{p[0]:.6f}", f"{p[1]:.6f}", f"{p[2]:.6f}", STATUS_NAMES[int(s)]]
-        self.writer.writerow(row)
+        self.write_frames(np.array([frame]), np.array([time_s]), positions[None], status[None])
+
+    def write_frames(self, frames: np.ndarray, times: np.ndarray, positions: np.ndarray, status: np.ndarray) -> None:
+        """Frames (F,) numbered and timed (F,), their joints' positions (F, J, 3) and status (F, J)."""
+        missing = ((status == 0) | np.isnan(positions).any(axis=2)).tolist()
+        names = [[STATUS_NAMES[s] for s in row] for row in status.tolist()]
+        rows = []
+        for n, t, p, m, s in zip(frames.tolist(), times.tolist(), positions.tolist(), missing, names):
+            row = [n, "%.6f" % t]
+            for (x, y, z), lost, name in zip(p, m, s):
+                row += ["", "", "", "missing"] if lost else ["%.6f" % x, "%.6f" % y, "%.6f" % z, name]
+            rows.append(row)
+        self.writer.writerows(rows)
 
     def close(self) -> None:
         self.file.close()

@@ -93,7 +93,10 @@ class SkeletonPipeline:
     def calibrate(self, markers: np.ndarray):
         """The subject's bones from the joints that the take's landmarks locate (mocap_core.fit.calibration)."""
         frames = MarkerGate().filter_take(markers, self.frame_s)
-        landmarks, _ = HipInterpolator(when_lost=self.hips.when_lost).fill_landmarks(self.landmark_map.apply(frames))
+        return self._calibrate(HipInterpolator(when_lost=self.hips.when_lost).fill_landmarks(
+            self.landmark_map.apply(frames))[0])
+
+    def _calibrate(self, landmarks: np.ndarray):
         loc = Localizer(self.localizer.body).localize(landmarks)  # (a fresh one: the solve's keeps its body estimates)
         return calibrate_bones(loc.positions, loc.frames, self.profile_name)
 
@@ -101,8 +104,10 @@ class SkeletonPipeline:
         """A take's frames, the markers no body could have put there dropped first (mocap_core.marker_gate). With
         rigid chains and no subject given, the subject's bones are calibrated from the whole take first
         (``calibrate`` false: learned frame by frame, as the graph's nodes learn them from a stream)."""
+        frames = self.gate.filter_take(markers, self.frame_s)
+        landmarks = self.landmarks(frames)  # (what the calibration localizes too: gated and hip-filled once)
         if calibrate and self.filler is not None and self.filler.rigid and self.subject is None:
-            self.use(self.calibrate(markers))
+            self.use(self._calibrate(landmarks))
         for start in range(0, len(markers), chunk):
-            part = self.gate.filter_take(markers[start:start + chunk], self.frame_s, start)
-            yield self.solve_landmarks(self.landmarks(part), start, self.landmark_map.tracking(part), part)
+            part = frames[start:start + chunk]
+            yield self.solve_landmarks(landmarks[start:start + chunk], start, self.landmark_map.tracking(part), part)
