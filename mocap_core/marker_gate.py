@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from mocap_core.world import MAX_COORDINATE_M
 
@@ -36,12 +37,11 @@ class MarkerGate:
 
     def filter(self, markers: np.ndarray, time_s: float) -> tuple[np.ndarray, np.ndarray]:
         """One frame's markers (M, 3) -> (a copy with the impossible ones NaN, the mask of those)."""
-        x = np.array(markers, np.float64)
+        x = np.array(markers, np.float64, order="C")  # (the kernel is compiled for C order only)
         m = len(x)
         if self.last is None or len(self.last) != m:
             self.last, self.last_t = np.full((m, 3), np.nan), np.full(m, np.nan)
             self.rejected, self.rejected_t = np.full((m, 3), np.nan), np.full(m, np.nan)
-        seen = np.isfinite(x).all(axis=1)
         if math.isfinite(self.last_time_s):
             if time_s > self.last_time_s:
                 self.frame_s = min(time_s - self.last_time_s, 1.0)
@@ -50,21 +50,9 @@ class MarkerGate:
         elif not math.isfinite(time_s):
             time_s = 0.0
         self.last_time_s = time_s
-        with np.errstate(invalid="ignore", over="ignore"):
-            bad = seen & ~(np.abs(x) <= self.max_distance_m).all(axis=1)
-            near = seen & ~bad
-            if (near & ~np.isfinite(self.last_t)).any() and near.sum() >= 3:  # (only a new marker needs the body)
-                near &= _norm(x - np.median(x[near], axis=0)) <= self.max_body_m
-            fast = seen & ~bad & ~self._reachable(x, self.last, self.last_t, time_s, near)
-            if fast.any():  # (most frames have none: the check against the rejected places is for them)
-                fast &= ~self._reachable(x, self.rejected, self.rejected_t, time_s, False)  # not a track going on
-                self.rejected[fast], self.rejected_t[fast] = x[fast], time_s
-        drop = bad | fast
-        keep = seen & ~drop
-        self.last[keep], self.last_t[keep] = x[keep], time_s
-        if drop.any():
-            x[drop] = np.nan
-            self.dropped += int(drop.sum())
+        drop = np.zeros(m, np.bool_)
+        self.dropped += _screen(x, (self.last, self.last_t, self.rejected, self.rejected_t), float(time_s),
+                                (float(self.max_speed_m_s), float(self.max_distance_m), float(self.max_body_m)), drop)
         return x, drop
 
     def filter_take(self, markers: np.ndarray, frame_s: float, start: int = 0) -> np.ndarray:
@@ -74,13 +62,69 @@ class MarkerGate:
             out[f] = self.filter(markers[f], (start + f) * frame_s)[0]
         return out
 
-    def _reachable(self, x, before, before_t, time_s, unknown) -> np.ndarray:
-        """Markers within max speed of where they were at ``before_t``; ``unknown`` (bool, or per marker) for those
-        with no such place."""
-        ok = _norm(x - before) <= self.max_speed_m_s * (time_s - before_t)
-        return np.where(np.isfinite(before_t), ok, unknown)
+
+@njit(cache=True)
+def _screen(x, state, time_s, limits, drop):
+    """One frame's markers ``x`` (M, 3) in place: the impossible ones NaN and marked in ``drop``; ``state``: the gate's
+    (last, last_t, rejected, rejected_t), updated; ``limits``: (max speed, max distance, max body). Returns how many
+    it dropped."""
+    last, last_t, rejected, rejected_t = state
+    max_speed, max_distance, max_body = limits
+    m = x.shape[0]
+    seen, near = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
+    bad = np.zeros(m, np.bool_)
+    n_near, new = 0, False
+    for i in range(m):
+        seen[i] = np.isfinite(x[i, 0]) and np.isfinite(x[i, 1]) and np.isfinite(x[i, 2])
+        bad[i] = seen[i] and not (abs(x[i, 0]) <= max_distance and abs(x[i, 1]) <= max_distance
+                                  and abs(x[i, 2]) <= max_distance)
+        near[i] = seen[i] and not bad[i]
+        if near[i]:
+            n_near += 1
+            new = new or not np.isfinite(last_t[i])
+    if new and n_near >= 3:  # (only a new marker needs the body: within max_body of the markers' median)
+        column = np.empty(n_near)
+        middle = np.empty(3)
+        for c in range(3):
+            k = 0
+            for i in range(m):
+                if near[i]:
+                    column[k] = x[i, c]
+                    k += 1
+            middle[c] = np.median(column)
+        for i in range(m):
+            if near[i]:
+                near[i] = _distance(x[i], middle) <= max_body
+    dropped = 0
+    for i in range(m):
+        if not seen[i]:
+            continue
+        fast = not bad[i] and not _reachable(x[i], last[i], last_t[i], time_s, max_speed, near[i])
+        # (a marker that moved too fast is kept where its new track goes on from where it was last rejected)
+        if fast and not _reachable(x[i], rejected[i], rejected_t[i], time_s, max_speed, False):
+            rejected[i] = x[i]
+            rejected_t[i] = time_s
+        else:
+            fast = False
+        if bad[i] or fast:
+            drop[i] = True
+            x[i] = np.nan
+            dropped += 1
+        else:
+            last[i] = x[i]
+            last_t[i] = time_s
+    return dropped
 
 
-def _norm(v: np.ndarray) -> np.ndarray:
-    """Each row's length, as np.linalg.norm(v, axis=1) computes it, without its checks (a few us a call)."""
-    return np.sqrt((v * v).sum(axis=1))
+@njit(cache=True, inline="always")
+def _distance(a, b):
+    d0, d1, d2 = a[0] - b[0], a[1] - b[1], a[2] - b[2]
+    return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@njit(cache=True, inline="always")
+def _reachable(x, before, before_t, time_s, max_speed, unknown):
+    """Whether a marker is within ``max_speed`` of where it was at ``before_t``; ``unknown`` where it was nowhere."""
+    if not np.isfinite(before_t):
+        return unknown
+    return _distance(x, before) <= max_speed * (time_s - before_t)

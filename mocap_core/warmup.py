@@ -31,11 +31,12 @@ STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "num
 # that kernel's newer cache it can crash ("'descr' is NULL"). So a change of any kernel source drops them all.
 CACHED_SOURCES = PACKAGE / "__pycache__" / "numba-sources"
 # The longest to compile come first, so that spread over the cores the last one to finish starts early.
-PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "solvers", "pair_guard", "rotations")
+PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "solvers", "gate", "pair_guard",
+         "rotations")
 # One limb-fill kernel serves every solver and option (the solver and the fills are its arguments): these
 # parts compile it once, in one process, or two processes would compile the same kernel at the same time.
 FILL_PARTS = ("beyond", "solvers")
-FIT_PARTS = ("fit", "localization")  # the fit localizes the frames that calibrate it
+FIT_PARTS = ("fit", "localization", "gate")  # the fit localizes the frames that calibrate it, gated first
 
 
 def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = True) -> None:
@@ -49,8 +50,8 @@ def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = Tru
 
 def hip_parts(options) -> tuple[str, ...]:
     """The kernels the hip stage runs with these options (mocap_core.fill_options.HipOptions, or params that
-    derive from it)."""
-    return tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(options, part))
+    derive from it): the marker gate, and its fills'."""
+    return ("gate",) + tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(options, part))
 
 
 def fill_parts(options) -> tuple[str, ...]:
@@ -68,8 +69,11 @@ def pipeline_parts(preset: str, fill_gaps: bool = True) -> tuple[str, ...]:
     """What mocap_core.pipeline.SkeletonPipeline runs with these arguments."""
     from mocap_core.presets import PRESETS
 
-    fills = hip_parts(PRESETS[preset].hips) + fill_parts(PRESETS[preset].ik) if fill_gaps else ()
-    return ("localization",) + fills
+    from mocap_core.fill_options import HipOptions
+
+    if not fill_gaps:
+        return ("localization",) + hip_parts(HipOptions())
+    return ("localization",) + hip_parts(PRESETS[preset].hips) + fill_parts(PRESETS[preset].ik)
 
 
 def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
@@ -84,11 +88,11 @@ def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
 
 
 def _warm(part: str) -> None:
-    """Run one part's kernels once: localization, the segment rebuild (and the leg hinge), the pose memory, the
-    pair guard, the fit, the rotation conversions of the rig's pose, the blend at a gap's ends, a solve on a chain
-    with a missing middle joint by every solver ("solvers"), or by CCD with the analytic fills of the studio
-    options ("beyond")."""
-    {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
+    """Run one part's kernels once: localization, the marker gate, the segment rebuild (and the leg hinge), the
+    pose memory, the pair guard, the fit, the rotation conversions of the rig's pose, the blend at a gap's ends, a
+    solve on a chain with a missing middle joint by every solver ("solvers"), or by CCD with the analytic fills of
+    the studio options ("beyond")."""
+    {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard, "gate": _warm_gate,
      "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations,
      "blend": _warm_blend, "solvers": _warm_solvers, "beyond": _warm_beyond}[part]()
 
@@ -132,6 +136,15 @@ def _warm_pair_guard() -> None:
     from mocap_core.profiles import LANDMARKS
 
     PairGuard().fill(np.random.default_rng(0).normal(size=(len(LANDMARKS), 3)))
+
+
+def _warm_gate() -> None:  # a first frame (every marker new: the body's median), then a marker too fast
+    from mocap_core.marker_gate import MarkerGate
+
+    gate, markers = MarkerGate(), np.random.default_rng(0).normal(size=(4, 3))
+    gate.filter(markers, 0.0)
+    markers[0] += 10.0
+    gate.filter(markers, 0.01)
 
 
 def _warm_fit() -> None:  # the rigid-skeleton fit: a start, then a frame warm-started from it

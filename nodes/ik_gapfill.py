@@ -73,7 +73,8 @@ class IkGapfill(Node):
 
     @classmethod
     def kernels(cls, params):
-        return fill_parts(params) + (("fit",) if params.subject else ())  # (a subject's markers: the fit's solve)
+        # (a subject's markers: gated, then the fit's solve)
+        return fill_parts(params) + (("fit", "gate") if params.subject else ())
 
     def setup(self) -> None:
         p = self.params

@@ -129,3 +129,21 @@ def test_frames_replayed_from_half_a_second_before_leave_no_trace_half_a_second_
         markers[start:start + 12] = markers[start - half:start - half + 12]
         after = start + 12 + half
         assert np.nanmax(np.linalg.norm(solve(markers)[after:] - clean[after:], axis=-1)) < 0.01, start
+
+
+def test_frames_of_any_memory_layout_and_dtype_run_the_one_compiled_gate():
+    """A file's frames may come transposed (Fortran order) or as float32 off the wire: the gate takes them as the
+    kernel it was warmed up with, and says the same of them (no second compile on a node's first frame)."""
+    from mocap_core.marker_gate import _screen
+    from mocap_core.warmup import warm_up
+
+    warm_up(("gate",), stamp=False)
+    x = walking().astype(np.float32)
+    x[30] += [1.0, 0.0, 0.0]
+    plain, other = MarkerGate(), MarkerGate()
+    for f in range(len(x)):
+        a = plain.filter(x[f].astype(np.float64), f / 100.0)
+        b = other.filter(np.asfortranarray(x[f]), f / 100.0)
+        assert np.array_equal(a[0], b[0], equal_nan=True) and np.array_equal(a[1], b[1])
+    assert plain.dropped == other.dropped == 4
+    assert len(_screen.signatures) == 1
