@@ -31,12 +31,12 @@ STAMP = Path(os.environ.get("MOCAP_KERNEL_STAMP", PACKAGE / "__pycache__" / "num
 # that kernel's newer cache it can crash ("'descr' is NULL"). So a change of any kernel source drops them all.
 CACHED_SOURCES = PACKAGE / "__pycache__" / "numba-sources"
 # The longest to compile come first, so that spread over the cores the last one to finish starts early.
-PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "solvers", "gate", "pair_guard",
+PARTS = ("beyond", "rebuild", "localization", "fit", "pose_memory", "blend", "solvers", "markers", "pair_guard",
          "rotations")
 # One limb-fill kernel serves every solver and option (the solver and the fills are its arguments): these
 # parts compile it once, in one process, or two processes would compile the same kernel at the same time.
 FILL_PARTS = ("beyond", "solvers")
-FIT_PARTS = ("fit", "localization", "gate")  # the fit localizes the frames that calibrate it, gated first
+FIT_PARTS = ("fit", "localization", "markers")  # the fit localizes the frames that calibrate it, gated first
 
 
 def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = True) -> None:
@@ -50,8 +50,8 @@ def warm_up(parts: tuple[str, ...] = PARTS, say: bool = False, stamp: bool = Tru
 
 def hip_parts(options) -> tuple[str, ...]:
     """The kernels the hip stage runs with these options (mocap_core.fill_options.HipOptions, or params that
-    derive from it): the marker gate, and its fills'."""
-    return ("gate",) + tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(options, part))
+    derive from it): the marker gate and the landmark map ("markers"), and its fills'."""
+    return ("markers",) + tuple(part for part in ("rebuild", "pose_memory", "pair_guard") if getattr(options, part))
 
 
 def fill_parts(options) -> tuple[str, ...]:
@@ -88,11 +88,11 @@ def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
 
 
 def _warm(part: str) -> None:
-    """Run one part's kernels once: localization, the marker gate, the segment rebuild (and the leg hinge), the
+    """Run one part's kernels once: localization, the marker gate and the landmark map, the segment rebuild (and the leg hinge), the
     pose memory, the pair guard, the fit, the rotation conversions of the rig's pose, the blend at a gap's ends, a
     solve on a chain with a missing middle joint by every solver ("solvers"), or by CCD with the analytic fills of
     the studio options ("beyond")."""
-    {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard, "gate": _warm_gate,
+    {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard, "markers": _warm_markers,
      "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations,
      "blend": _warm_blend, "solvers": _warm_solvers, "beyond": _warm_beyond}[part]()
 
@@ -138,13 +138,21 @@ def _warm_pair_guard() -> None:
     PairGuard().fill(np.random.default_rng(0).normal(size=(len(LANDMARKS), 3)))
 
 
-def _warm_gate() -> None:  # a first frame (every marker new: the body's median), then a marker too fast
+def _warm_markers() -> None:
+    """The marker gate (a first frame: every marker new, so the body's median; then a marker too fast) and the landmark
+    map (one frame, as a node maps it, and a take's)."""
     from mocap_core.marker_gate import MarkerGate
+    from mocap_core.profiles import load_profile
 
     gate, markers = MarkerGate(), np.random.default_rng(0).normal(size=(4, 3))
     gate.filter(markers, 0.0)
     markers[0] += 10.0
     gate.filter(markers, 0.01)
+    profile = load_profile("qualisys_sports")
+    labels = sorted({n for landmark in profile.landmarks for n in profile.markers_of(landmark)})
+    landmarks = profile.resolve(labels)
+    landmarks.apply(np.zeros((len(labels), 3), np.float32))
+    landmarks.apply(np.zeros((2, len(labels), 3)))
 
 
 def _warm_fit() -> None:  # the rigid-skeleton fit: a start, then a frame warm-started from it

@@ -74,7 +74,7 @@ class IkGapfill(Node):
     @classmethod
     def kernels(cls, params):
         # (a subject's markers: gated, then the fit's solve)
-        return fill_parts(params) + (("fit", "gate") if params.subject else ())
+        return fill_parts(params) + (("fit", "markers") if params.subject else ())
 
     def setup(self) -> None:
         p = self.params

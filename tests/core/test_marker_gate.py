@@ -137,7 +137,7 @@ def test_frames_of_any_memory_layout_and_dtype_run_the_one_compiled_gate():
     from mocap_core.marker_gate import _screen
     from mocap_core.warmup import warm_up
 
-    warm_up(("gate",), stamp=False)
+    warm_up(("markers",), stamp=False)
     x = walking().astype(np.float32)
     x[30] += [1.0, 0.0, 0.0]
     plain, other = MarkerGate(), MarkerGate()

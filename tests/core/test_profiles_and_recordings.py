@@ -147,3 +147,16 @@ def test_a_marker_set_no_shipped_profile_fits_is_solved_with_a_draft(caplog):
     hands = [INDEX["hand_l"], INDEX["hand_r"]]
     others = [j for j in range(status.shape[1]) if j not in hands]
     assert (status[:, others] != Status.MISSING).mean() > 0.99
+
+
+def test_a_landmark_is_the_mean_of_its_markers_in_a_take_and_in_a_frame_alone():
+    rec = read_recording(data_file("02_qualisys_walking_ezc3d_Qualisys.c3d"))
+    profile = load_profile("qualisys_sports")
+    lmap = profile.resolve(rec.labels)
+    whole = lmap.apply(rec.positions)
+    columns = [rec.labels.index(x) for x in profile.markers_of("SACR")]
+    assert len(columns) == 2
+    np.testing.assert_array_equal(whole[:, LANDMARK_INDEX["SACR"]],
+                                  rec.positions[:, columns].astype(np.float64).mean(axis=1))
+    for f in (0, 100):  # a frame as a node gets it (float32, any memory layout) maps as in the take
+        np.testing.assert_array_equal(lmap.apply(np.asfortranarray(rec.positions[f])), whole[f])

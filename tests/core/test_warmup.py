@@ -64,16 +64,16 @@ def test_a_node_kind_and_a_solve_name_the_kernels_they_run():
     assert gapfill.kernels(gapfill.Params(limb="left_arm", preset="thesis", solver="fabrik")) == ("solvers",)
     assert gapfill.kernels(gapfill.Params(limb="left_arm"))[0] == "beyond"
     hips = load_kind("hip_interpolation")
-    assert hips.kernels(hips.Params(preset="thesis")) == ("gate",)
-    assert set(hips.kernels(hips.Params())) == {"gate", "rebuild", "pose_memory", "pair_guard"}
+    assert hips.kernels(hips.Params(preset="thesis")) == ("markers",)
+    assert set(hips.kernels(hips.Params())) == {"markers", "rebuild", "pose_memory", "pair_guard"}
     for kind in ("ik_gapfill", "hip_interpolation", "joint_localization", "skeleton_fit", "retarget"):
         cls = load_kind(kind)
         params = cls.Params(limb="torso") if kind == "ik_gapfill" else cls.Params()
         assert set(cls.kernels(params)) <= set(warmup.PARTS), kind
-    assert warmup.pipeline_parts("thesis") == ("localization", "gate", "solvers")
-    assert set(warmup.pipeline_parts("studio")) == {"localization", "gate", "rebuild", "pose_memory",
+    assert warmup.pipeline_parts("thesis") == ("localization", "markers", "solvers")
+    assert set(warmup.pipeline_parts("studio")) == {"localization", "markers", "rebuild", "pose_memory",
                                                           "pair_guard", "beyond", "blend"}
-    assert warmup.pipeline_parts("studio", fill_gaps=False) == ("localization", "gate")
+    assert warmup.pipeline_parts("studio", fill_gaps=False) == ("localization", "markers")
 
 
 def test_a_change_of_kernel_sources_drops_every_cached_kernel(tmp_path, monkeypatch):
