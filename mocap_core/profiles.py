@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from mocap_core.world import DEFAULT_UP, normalize_up
@@ -231,24 +230,12 @@ class LandmarkMap:
         """markers (..., n_labels, 3) -> landmarks (..., n_landmarks, 3), float64."""
         if markers.shape[-2] != self.n_labels:
             raise ProfileError(f"frame has {markers.shape[-2]} markers, the profile was resolved for {self.n_labels}")
+        from mocap_core.landmark_means import means  # (numba: loaded by what maps frames, not by what reads profiles)
+
         frames = np.ascontiguousarray(markers, np.float64).reshape(-1, self.n_labels, 3)
         out = np.empty((len(frames), len(self.count), 3))
-        _means(frames, self.idx, self.count, out)
+        means(frames, self.idx, self.count, out)
         return out.reshape(markers.shape[:-2] + out.shape[1:])
-
-
-@njit(cache=True)
-def _means(markers, idx, count, out):
-    """Each frame's landmarks (F, n_landmarks, 3) into ``out``: the mean of the markers ``idx`` names (a row padded
-    with the index past the last marker, which reads as 0), summed in the row's order; NaN where ``count`` is 0."""
-    n = markers.shape[1]
-    for f in range(markers.shape[0]):
-        for i in range(idx.shape[0]):
-            for c in range(3):
-                total = markers[f, idx[i, 0], c] if idx[i, 0] < n else 0.0
-                for k in range(1, idx.shape[1]):
-                    total += markers[f, idx[i, k], c] if idx[i, k] < n else 0.0
-                out[f, i, c] = total / count[i] if count[i] != 0 else np.nan
 
 
 def load_profile(name_or_path: str | Path) -> Profile:

@@ -107,3 +107,21 @@ def test_the_hip_stages_parts_compile_every_kernel_its_fills_run():
     done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "[]"
+
+
+def test_a_node_kind_that_runs_no_kernel_loads_no_numba():
+    """Sources, relays, the recorder and the outputs are light processes: importing one loads neither numba nor (but
+    for the BVH writer's and Foxglove's rotation conversions) scipy."""
+    kinds = ("synthetic_source", "file_source", "qtm_ingest", "bag_player", "relay", "raw_relay", "recorder",
+             "frame_log", "vmc_output", "viewer", "bvh_writer", "foxglove_output")
+    code = ("import sys\nfrom nodes.registry import load_kind\n"
+            f"for kind in {kinds!r}:\n"
+            "    load_kind(kind)\n"
+            "print(sorted(m for m in ('numba', 'scipy') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "['scipy']"
+    light = kinds[:-2]
+    code = code.replace(repr(kinds), repr(light))
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr[-2000:]
