@@ -91,6 +91,7 @@ class BvhWriter:
         self.model_local = np.einsum("jki,jk->ji", self.rest[_PARENT], t_pos - t_pos[_PARENT])
         self.samples: list[np.ndarray] = []            # (F, J, 3) each joint's place in its parent's frame
         self.n_samples = 0
+        self.final_offsets: np.ndarray | None = None   # the OFFSETs once MAX_SAMPLES frames have made them
         self.rows: list[str] = []                      # not yet on disk
         self.frames = 0                                # rows on disk and pending
         self.flush_rows = max(1, int(round(flush_s * rate_hz)))
@@ -153,6 +154,8 @@ class BvhWriter:
 
     def offsets(self) -> np.ndarray:
         """Each joint's OFFSET (J, 3): its median place in its parent's frame, turned into the T-pose."""
+        if self.final_offsets is not None:
+            return self.final_offsets
         local = self.model_local.copy()
         if self.samples:
             stack = np.concatenate(self.samples)
@@ -161,6 +164,8 @@ class BvhWriter:
                 local[seen] = np.nanmedian(stack[:, seen], axis=0)
         out = np.einsum("jik,jk->ji", self.rest[_PARENT], local)
         out[0] = 0.0
+        if self.n_samples >= MAX_SAMPLES:  # no frame is sampled after these: every later header has the same
+            self.final_offsets = out
         return out
 
     def _write_header(self) -> None:
