@@ -51,15 +51,16 @@ class EndModel(LimbFill):
         limb, model = self.limb, self.model
         model.learn(positions, frames, status)
         idx, root, k, frame_s = limb.joints, model.root, model.k, limb.clock.frame_s
-        if status[idx[k]] != MISSING:  # seen, or put by the hip stage's fills (the leg hinge, say): nothing to put
+        seen = status[idx[k]] != MISSING  # seen, or put by the hip stage's fills (the leg hinge, say)
+        if seen:
             self.end_seen = status[idx[k]] == LOCATED
-            if limb.has_prev[0] and (self.end_seen or all_finite(self.end_local)):
-                model.last_local[:] = np.nan  # (the gap, if one was going on, is over)
-                self.end_local[:] = np.nan
-            return 0
         # a limb whose better fill drops out for a few frames is held as that fill left it, not handed to the
         # model and back (each hand-over is a jump of its own)
         if not limb.has_prev[0] or not (self.end_seen or all_finite(self.end_local)):
+            return 0
+        if seen:  # nothing to put, and the gap, if one was going on, is over
+            model.last_local[:] = np.nan
+            self.end_local[:] = np.nan
             return 0
         point, weight = model.predict(positions, frames, status, frame_s)
         if not all_finite(point):

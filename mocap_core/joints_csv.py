@@ -30,9 +30,6 @@ class JointsCsvWriter:
         self.writer = csv.writer(self.file)
         self.writer.writerow(header())
 
-    def write(self, frame: int, time_s: float, positions: np.ndarray, status: np.ndarray) -> None:
-        self.write_frames(np.array([frame]), np.array([time_s]), positions[None], status[None])
-
     def write_frames(self, frames: np.ndarray, times: np.ndarray, positions: np.ndarray, status: np.ndarray) -> None:
         """Frames (F,) numbered and timed (F,), their joints' positions (F, J, 3) and status (F, J)."""
         missing = ((status == 0) | np.isnan(positions).any(axis=2)).tolist()

@@ -99,13 +99,12 @@ def _screen(x, state, time_s, limits, drop):
     for i in range(m):
         if not seen[i]:
             continue
-        fast = not bad[i] and not _reachable(x[i], last[i], last_t[i], time_s, max_speed, near[i])
-        # (a marker that moved too fast is kept where its new track goes on from where it was last rejected)
-        if fast and not _reachable(x[i], rejected[i], rejected_t[i], time_s, max_speed, False):
+        # too fast from where it was last accepted, and not a new track going on from where it was last rejected
+        fast = (not bad[i] and not _reachable(x[i], last[i], last_t[i], time_s, max_speed, near[i])
+                and not _reachable(x[i], rejected[i], rejected_t[i], time_s, max_speed, False))
+        if fast:
             rejected[i] = x[i]
             rejected_t[i] = time_s
-        else:
-            fast = False
         if bad[i] or fast:
             drop[i] = True
             x[i] = np.nan

@@ -67,13 +67,11 @@ def fill_parts(options) -> tuple[str, ...]:
 
 def pipeline_parts(preset: str, fill_gaps: bool = True) -> tuple[str, ...]:
     """What mocap_core.pipeline.SkeletonPipeline runs with these arguments."""
+    from mocap_core.fill_options import HipOptions
     from mocap_core.presets import PRESETS
 
-    from mocap_core.fill_options import HipOptions
-
-    if not fill_gaps:
-        return ("localization",) + hip_parts(HipOptions())
-    return ("localization",) + hip_parts(PRESETS[preset].hips) + fill_parts(PRESETS[preset].ik)
+    hips = PRESETS[preset].hips if fill_gaps else HipOptions()  # (without the fills: the gate and the map still run)
+    return ("localization",) + hip_parts(hips) + (fill_parts(PRESETS[preset].ik) if fill_gaps else ())
 
 
 def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
@@ -88,11 +86,12 @@ def ensure_compiled(log, parts: tuple[str, ...] = PARTS) -> bool:
 
 
 def _warm(part: str) -> None:
-    """Run one part's kernels once: localization, the marker gate and the landmark map, the segment rebuild (and the leg hinge), the
-    pose memory, the pair guard, the fit, the rotation conversions of the rig's pose, the blend at a gap's ends, a
-    solve on a chain with a missing middle joint by every solver ("solvers"), or by CCD with the analytic fills of
-    the studio options ("beyond")."""
-    {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard, "markers": _warm_markers,
+    """Run one part's kernels once: localization, the marker gate and the landmark map ("markers"), the segment
+    rebuild (and the leg hinge), the pose memory, the pair guard, the fit, the rotation conversions of the rig's pose,
+    the blend at a gap's ends, a solve on a chain with a missing middle joint by every solver ("solvers"), or by CCD
+    with the analytic fills of the studio options ("beyond")."""
+    {"rebuild": _warm_rebuild, "pose_memory": _warm_pose_memory, "pair_guard": _warm_pair_guard,
+     "markers": _warm_markers,
      "fit": _warm_fit, "localization": _warm_localization, "rotations": _warm_rotations,
      "blend": _warm_blend, "solvers": _warm_solvers, "beyond": _warm_beyond}[part]()
 
