@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from mocap_core.skeleton import ESTIMATED, HELD, LOCATED, MISSING
-from mocap_core.ik.kernels import angle_about, axis_angle, mm, mtv, mv, rotation_between, vcross, vdot, vnorm
+from mocap_core.ik.kernels import angle_about, axis_angle, mm, mtv, mv, rotation_between, vcross, vdist, vdot, vnorm
 
 MIN_SAMPLES = 30    # located frames before a bone's direction in the next joint's frame is trusted
 # Where on the swivel circle: the bone's direction in the next joint's frame nearest its usual one,
@@ -54,14 +54,17 @@ def all_finite(a):
 @njit(cache=True)
 def learn_directions(positions, frames, status, idx, dir_sum, dir_sq, dir_n):
     """Accumulate each bone's direction in the frame of the joint it ends at, while both are located."""
+    unit = np.empty(3)
     for k in range(1, idx.shape[0] - 1):
         if status[idx[k]] != LOCATED or status[idx[k + 1]] != LOCATED:
             continue
-        bone = positions[idx[k + 1]] - positions[idx[k]]
-        size = vnorm(bone)
-        frame = frames[idx[k + 1]].copy()
+        a, b = positions[idx[k]], positions[idx[k + 1]]
+        size = vdist(b, a)
+        frame = frames[idx[k + 1]]
         if size > 1e-6 and all_finite(frame):
-            local = mtv(frame, bone / size)
+            for c in range(3):
+                unit[c] = (b[c] - a[c]) / size
+            local = mtv(frame, unit)
             for c in range(3):
                 dir_sum[k, c] += local[c]
                 dir_sq[k, c] += local[c] * local[c]
@@ -74,7 +77,7 @@ def learn_lengths(positions, status, idx, lengths):
     and one frame's length (the last one seen before a gap) carries that frame's marker noise."""
     for k in range(idx.shape[0] - 1):
         if status[idx[k]] == LOCATED and status[idx[k + 1]] == LOCATED:
-            size = vnorm(positions[idx[k + 1]] - positions[idx[k]])
+            size = vdist(positions[idx[k + 1]], positions[idx[k]])
             if np.isfinite(size):
                 lengths[k, 0] += size
                 lengths[k, 1] += 1

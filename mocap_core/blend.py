@@ -38,7 +38,7 @@ from pydantic import BaseModel, Field
 from mocap_core.analytic_fill import all_finite, nearest_on_circle, nearest_on_sphere
 from mocap_core.fill_units import LimbFill, LimbFrame
 from mocap_core.frame_clock import FrameClock
-from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vnorm
+from mocap_core.ik.kernels import axis_angle, line_carry, mm, mv, rotation_vector, vdist, vnorm
 from mocap_core.skeleton import ESTIMATED, HELD, LOCATED, MISSING
 
 REACQUIRE_HELP = ("beyond the thesis: close the gap to returning markers by at most this many metres a frame (0 = the "
@@ -222,9 +222,11 @@ def blend_frames(frames, status, idx, last_status, has_last, turning, omega, dt)
     last_frame, turn_axis, turn = turning
     decay = math.exp(-omega * dt)
     n = idx.shape[0]
+    this = np.empty((3, 3))
     for k in range(n):
         j = idx[k]
-        frame = frames[j].copy()
+        this[:] = frames[j]
+        frame = this
         s, was = status[j], last_status[k]
         if not all_finite(frame):
             last_frame[k] = np.nan
@@ -260,7 +262,7 @@ def _take_step(velocity, step, last_step, limit):
     step (a jump, or two fills of one kind that are not one source), in place. (Faster alone is not enough: a
     fast joint filled along a curve leaves its last step by more than the threshold frame after frame, and would
     be met as a jump every frame, standing still.)"""
-    if vnorm(step) <= limit or vnorm(step - last_step) <= limit:
+    if vnorm(step) <= limit or vdist(step, last_step) <= limit:
         velocity[:] = step
 
 
@@ -271,7 +273,7 @@ def _change(raw, heading, s, was, k, mem, dt):
     lost = s != LOCATED and was == LOCATED
     gave_up = s == HELD and was == ESTIMATED and since_loss[k] == math.inf
     found_or_lost = (s == LOCATED) != (was == LOCATED)
-    jumped = s != LOCATED and was != LOCATED and vnorm(raw - heading) > SOURCE_JUMP_M_S * dt
+    jumped = s != LOCATED and was != LOCATED and vdist(raw, heading) > SOURCE_JUMP_M_S * dt
     spike = jumped and s == was and vnorm(raw - (prev_raw[k] + 2.0 * prev_vel[k])) <= SOURCE_JUMP_M_S * dt
     jumped = jumped and not spike
     # handed from one fill to another (estimated, held) without such a jump: the new fill's jump goes into the
@@ -279,8 +281,8 @@ def _change(raw, heading, s, was, k, mem, dt):
     # from itself at its own step into the estimate, as into returning markers
     handed = s != LOCATED and was != LOCATED and was != MISSING and s != was and not jumped
     trust[k, LOCATED_RUN] = trust[k, LOCATED_RUN] + 1 if s == LOCATED else 0
-    if trust[k, LOCATED_RUN] >= 3 and vnorm(raw - last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two markers' steps
-        trust[k, ACC_SUM] += vnorm(raw - heading) / (dt * dt)  # |acceleration|
+    if trust[k, LOCATED_RUN] >= 3 and vdist(raw, last_raw[k]) <= SOURCE_JUMP_M_S * dt:  # two markers' steps
+        trust[k, ACC_SUM] += vdist(raw, heading) / (dt * dt)  # |acceleration|
         trust[k, ACC_N] += 1
     if s == LOCATED and was != LOCATED and was != MISSING:  # how far the output's course missed the markers
         # at most MISS_SIGMAS of the misses so far: one glitch (frames replayed) must not set the trust for good
@@ -323,18 +325,21 @@ def _new_offset(raw, heading, s, was, k, mem, cfg, c):
 
 
 @njit(cache=True, inline="always")
-def _spring_blend(p, s, was, k, mem, cfg, decay, neighbours):
+def _spring_blend(p, s, was, k, mem, cfg, decay, neighbours, scratch):
     """One joint's position ``p`` (status ``s``, ``was`` the frame before) plus its offset, in place; after
     a loss, eased from the markers' course into that (see blend_transitions). ``neighbours``: the joints
-    before and after it in the chain, where both are located, or its parent, where that alone is (else NaN)."""
+    before and after it in the chain, where both are located, or its parent, where that alone is (else NaN);
+    ``scratch``: (6, 3), room for the vectors it works with."""
     offset, offset_vel, last_raw, raw_vel, prev_raw, prev_vel = mem.offset, mem.offset_vel, mem.last_raw, \
         mem.raw_vel, mem.prev_raw, mem.prev_vel
     step, omega, dt = cfg.step, cfg.omega, cfg.dt
     kind = 0 if s == LOCATED else 1
-    raw = p.copy()
-    heading = last_raw[k] + raw_vel[k]  # where the source was heading
-    before_raw = last_raw[k].copy()  # (the next frame's prev_raw / prev_vel, for its spike test)
-    before_step = raw_vel[k].copy()  # (also the markers' last step, at a loss; the estimate's, given up)
+    raw, heading, before_raw, before_step, before, last_step = scratch
+    raw[:] = p
+    for e in range(3):
+        heading[e] = last_raw[k, e] + raw_vel[k, e]  # where the source was heading
+    before_raw[:] = last_raw[k]  # (the next frame's prev_raw / prev_vel, for its spike test)
+    before_step[:] = raw_vel[k]  # (also the markers' last step, at a loss; the estimate's, given up)
     c = _change(raw, heading, s, was, k, mem, dt)
     spring_moved = 0.0
     limit = step  # how far the blend may move the output off its source this frame
@@ -353,15 +358,20 @@ def _spring_blend(p, s, was, k, mem, cfg, decay, neighbours):
         if c.spike or c.handed:
             mem.offset_size[k] = vnorm(offset[k])
         if was != MISSING and not c.handed and not c.spike:  # (a hand-over's jump is not the source's step)
-            _take_step(raw_vel[k], raw - last_raw[k], last_raw[k] - prev_raw[k], SOURCE_JUMP_M_S * dt)
+            for e in range(3):  # (before and last_step as room for this step and the last)
+                before[e] = raw[e] - last_raw[k, e]
+                last_step[e] = last_raw[k, e] - prev_raw[k, e]
+            _take_step(raw_vel[k], before, last_step, SOURCE_JUMP_M_S * dt)
         limit = max(step, PACE_SHARE * vnorm(raw_vel[k]))
         if mem.offset_size[k] * dt > limit * MEET_S:
             limit = math.inf
-        before = offset[k].copy()
-        offset[k], offset_vel[k] = spring_step(before, offset_vel[k], omega, dt, decay)
-        moved = vnorm(offset[k] - before)
+        before[:] = offset[k]
+        for e in range(3):
+            offset[k, e], offset_vel[k, e] = spring_step(before[e], offset_vel[k, e], omega, dt, decay)
+        moved = vdist(offset[k], before)
         if step > 0 and moved > limit:
-            offset[k] = before + (offset[k] - before) * (limit / moved)
+            for e in range(3):
+                offset[k, e] = before[e] + (offset[k, e] - before[e]) * (limit / moved)
         spring_moved = min(moved, limit)
     last_raw[k] = raw
     prev_raw[k] = before_raw
@@ -443,11 +453,12 @@ def _ease(p, k, mem, step, room):
     course, eased = mem.course, mem.eased
     w = course_weight(mem.since_loss[k], mem.trust[k])
     w = 1.0 if w >= EASED else w
-    apart = vnorm(p - course[k])
+    apart = vdist(p, course[k])
     if step > 0 and (w - eased[k]) * apart > room:  # one cap on the two together
         w = eased[k] + max(room, 0.0) / apart
     eased[k] = min(w, 1.0)
-    p[:] = course[k] + eased[k] * (p - course[k])
+    for e in range(3):
+        p[e] = course[k, e] + eased[k] * (p[e] - course[k, e])
     if eased[k] == 1.0:
         mem.since_loss[k] = math.inf
 
@@ -456,7 +467,7 @@ def _ease(p, k, mem, step, room):
 def _keep_near(p, raw, k, mem, reach):
     """The output no further than ``reach`` from the fill ``raw`` that stands in (the course and the offset go on
     from there)."""
-    apart = vnorm(p - raw)
+    apart = vdist(p, raw)
     if apart > reach:
         p[:] = raw + (p - raw) * (reach / apart)
         mem.offset[k] = p - raw
@@ -513,7 +524,7 @@ def blend_transitions(positions, status, idx, memory, step, omega, dt, course_on
     cfg = BlendSettings(step, omega, dt, course_on)
     n = idx.shape[0]
     decay = math.exp(-omega * dt)
-    neighbours = np.empty((2, 3))
+    neighbours, scratch = np.empty((2, 3)), np.empty((6, 3))
     for k in range(n):
         j = idx[k]
         s = status[j]
@@ -536,11 +547,12 @@ def blend_transitions(positions, status, idx, memory, step, omega, dt, course_on
                 neighbours[1] = positions[idx[k + 1]]
             elif 1 < k and status[idx[k - 1]] == LOCATED:  # its parent alone (not the limb's root: _spring_blend)
                 neighbours[0] = positions[idx[k - 1]]
-            _spring_blend(positions[j], s, was, k, mem, cfg, decay, neighbours)
+            _spring_blend(positions[j], s, was, k, mem, cfg, decay, neighbours, scratch)
         else:
             _linear_return(positions[j], s, last_status[k], last_out[k], offset[k], step)
     for k in range(n):
-        out_step[k] = positions[idx[k]] - last_out[k]
+        for e in range(3):
+            out_step[k, e] = positions[idx[k], e] - last_out[k, e]
         last_out[k] = positions[idx[k]]
         last_status[k] = status[idx[k]]
     has_last[0] = True

@@ -32,6 +32,7 @@ LIMB_MEMORY_HELP = ("beyond the thesis: the swivel of a lone missing joint pulle
 NEIGHBOURS = 20     # remembered poses averaged
 MIN_POSES = 30      # poses before the memory is trusted
 MIRROR = np.array([-1.0, 1.0, 1.0])
+SAME = np.ones(3)
 
 
 class LimbMemory(LimbFill):
@@ -69,19 +70,27 @@ def _learn(skeleton, idx, other, parent, rings):
     if not all_finite(ref):
         return
     n = idx.shape[0]
+    step, key, val = np.empty(3), np.empty(3), np.empty((1, 3))  # (room for every pose of the frame)
     for src in range(2):
         if src == 1 and other[0] < 0:
             break
         chain = idx if src == 0 else other
-        sign = np.ones(3) if src == 0 else MIRROR
+        sign = SAME if src == 0 else MIRROR
         for k in range(1, n - 1):
             a, m, b = chain[k - 1], chain[k], chain[k + 1]
             if status[a] != LOCATED or status[m] != LOCATED or status[b] != LOCATED:
                 continue
-            key = mtv(ref, positions[b] - positions[a]) * sign
-            val = mtv(ref, positions[m] - positions[a]) * sign
+            for e in range(3):
+                step[e] = positions[b, e] - positions[a, e]
+            turned = mtv(ref, step)
+            for e in range(3):
+                key[e] = turned[e] * sign[e]
+                step[e] = positions[m, e] - positions[a, e]
+            turned = mtv(ref, step)
+            for e in range(3):
+                val[0, e] = turned[e] * sign[e]
             if all_finite(key) and all_finite(val):
-                keep(keys[k, src], vals[k, src], state[k, src], last[k, src], key, val.reshape(1, 3))
+                keep(keys[k, src], vals[k, src], state[k, src], last[k, src], key, val)
 
 
 @njit(cache=True)

@@ -15,7 +15,10 @@ MIN_MOVE_M = 0.005  # a pose is kept when its key has moved this far from the la
 def keep(keys, values, state, last_key, key, value):
     """Remember one pose (its key point and its values) if the key has moved since the last one kept.
     One ring: keys (CAPACITY, k), values (CAPACITY, m, 3), state [poses kept, where the next goes]."""
-    if np.sqrt(((key - last_key) ** 2).sum()) < MIN_MOVE_M:
+    moved = 0.0
+    for c in range(key.shape[0]):
+        moved += (key[c] - last_key[c]) ** 2
+    if np.sqrt(moved) < MIN_MOVE_M:
         return
     i = state[1]
     keys[i] = key

@@ -34,7 +34,7 @@ from mocap_core.fill_units import LimbFill, LimbFrame, switch
 from mocap_core.fit.calibration import ROTATING, LiveBones
 from mocap_core.fit.fitter import FitSettings, tree_of_unknowns
 from mocap_core.fit.kernel import fit_pose
-from mocap_core.ik.kernels import mm, mv, rotation_between
+from mocap_core.ik.kernels import mm, mv, rotation_between, vdist, vnorm
 from mocap_core.skeleton import END_SITES, ESTIMATED, LIMBS, LOCATED, MISSING
 
 RIGID_HELP = ("beyond the thesis: each limb output as the subject's rigid chain, its bones at their calibrated (or, "
@@ -222,26 +222,29 @@ def rigid_fit(skeleton, idx, parent, end_site, offsets, rest):
     L = np.empty(max(m - 1, 0))
     U = np.empty((max(m - 1, 0), 3))
     for k in range(m - 1):
-        bone = T[k + 1] - T[k]
-        size = math.sqrt(bone[0] * bone[0] + bone[1] * bone[1] + bone[2] * bone[2])
+        size = vdist(T[k + 1], T[k])
         known = offsets[k + 1]
-        L[k] = math.sqrt(known[0] * known[0] + known[1] * known[1] + known[2] * known[2]) if all_finite(known) \
-            else size
-        U[k] = bone / size if size > 1e-9 else np.array([0.0, 1.0, 0.0])
+        L[k] = vnorm(known) if all_finite(known) else size
+        for e in range(3):
+            U[k, e] = (T[k + 1, e] - T[k, e]) / size if size > 1e-9 else (1.0 if e == 1 else 0.0)
     _place(P, L, U)
+    want, move = np.empty(3), np.empty(3)  # (one pair for every sweep: this loop runs thousands of times a second)
     for _ in range(SWEEPS):
         for i in range(m - 1):
             # the joints after bone i, bone i taken out, want it pointing along the weighted mean of these
-            want = np.zeros(3)
+            want[:] = 0.0
             for k in range(i + 1, m):
-                want += w[k] * (T[k] - P[k] + L[i] * U[i])
+                for e in range(3):
+                    want[e] += w[k] * (T[k, e] - P[k, e] + L[i] * U[i, e])
             size = math.sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2])
             if size < 1e-12:
                 continue
-            move = L[i] * (want / size - U[i])
-            U[i] = want / size
+            for e in range(3):
+                move[e] = L[i] * (want[e] / size - U[i, e])
+                U[i, e] = want[e] / size
             for k in range(i + 1, m):
-                P[k] += move
+                for e in range(3):
+                    P[k, e] += move[e]
     for k in range(m):
         positions[idx[k]] = P[k]
     for k in range(m - 1):

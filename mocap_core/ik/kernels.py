@@ -33,6 +33,13 @@ def vnorm(v):
 
 
 @njit(cache=True)
+def vdist(a, b):
+    """vnorm(a - b), without making a - b (a kernel that runs every frame makes no array it need not)."""
+    d0, d1, d2 = a[0] - b[0], a[1] - b[1], a[2] - b[2]
+    return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@njit(cache=True)
 def follow(learned, sample, rate):
     """A learned value (a distance between two points on one bone) moved by ``rate`` towards a new
     ``sample``; the sample itself while nothing is learned (NaN)."""
