@@ -5,6 +5,7 @@ from __future__ import annotations
 import collections
 import gc
 import logging
+import math
 import signal
 import time
 
@@ -85,17 +86,19 @@ class NodeLoop:
     def is_pure_source(self) -> bool:
         return not self.ctx.subscribes and self.ctx.pub is not None
 
-    def wait_s(self, now: float) -> float:
-        """How long the process may block in poll before this node has something to do."""
+    def wait_ms(self, now: float) -> float:
+        """How long (ms) the process may block in poll before this node has something to do. A timer or heartbeat
+        is waited for to the next whole millisecond, as zmq polls: one due within a millisecond, rounded down,
+        would have the loop poll without blocking, spinning a core, until it is due. A source's tick keeps its
+        precision (a pure source sleeps the fraction)."""
         if self.ctx.inbox:
             return 0.0
-        if self.node_cls.is_source and self.started and not self.finished:
-            wait = max(0.0, self.next_tick - now)
-        else:
-            wait = 0.1
-        wait = min(wait, max(0.0, self.next_heartbeat - now), 0.1)
+        wait = min(self.next_heartbeat - now, 0.1)
         if self.timer:
-            wait = min(wait, max(0.0, self.next_timer - now))
+            wait = min(wait, self.next_timer - now)
+        wait = ceil_ms(wait)
+        if self.node_cls.is_source and self.started and not self.finished:
+            wait = min(wait, max(0.0, 1000 * (self.next_tick - now)))
         return wait
 
     def step(self, events: dict) -> bool:
@@ -216,6 +219,11 @@ class NodeLoop:
         return code
 
 
+def ceil_ms(seconds: float) -> int:
+    """A wait in whole milliseconds, rounded up (none: 0)."""
+    return max(0, math.ceil(seconds * 1000))
+
+
 def wire_hand_over(loops: list[NodeLoop]) -> None:
     """Connect a container's publishers to the neighbours that read their topics in-process."""
     readers: dict[str, list[NodeContext]] = collections.defaultdict(list)  # wire topic -> its readers
@@ -279,16 +287,16 @@ def run_nodes(nodes: list[tuple[NodeSpec, type[Node]]], zctx: zmq.Context | None
         running = True
         while running and not stopping:
             now = time.monotonic()
-            wait_s = loops[0].wait_s(now) if len(loops) == 1 else min(loop.wait_s(now) for loop in loops)
-            if wait_s < 0.001 and pure_source:
-                time.sleep(wait_s)  # a pure source: sub-millisecond pacing without spinning a core
-                wait_s = 0.0
+            wait_ms = loops[0].wait_ms(now) if len(loops) == 1 else min(loop.wait_ms(now) for loop in loops)
+            if wait_ms < 1 and pure_source:
+                time.sleep(wait_ms / 1000)  # a pure source: sub-millisecond pacing without spinning a core
+                wait_ms = 0.0
             settled = settled or (bool(data_poller.sockets) and all(lp.settled() for lp in loops))
-            # zmq polls in whole milliseconds; below one, poll without blocking.
+            # zmq polls in whole milliseconds: below one (a source's tick), poll without blocking.
             if settled and now < next_side_poll:
-                events = dict(data_poller.poll(int(min(wait_s, next_side_poll - now) * 1000)))
+                events = dict(data_poller.poll(int(min(wait_ms, ceil_ms(next_side_poll - now)))))
             else:
-                events = dict(poller.poll(int(wait_s * 1000)))
+                events = dict(poller.poll(int(wait_ms)))
                 next_side_poll = now + SIDE_POLL_S
             for current in loops:  # in launch-file order: upstream first, so a frame crosses in one pass
                 running = current.step(events) and running
