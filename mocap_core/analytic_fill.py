@@ -317,16 +317,6 @@ def _turn_towards(u, axis, to_point, weight):
 
 
 @njit(cache=True)
-def swivel_step(skeleton, chain, last, state, steer, out):
-    """The swivel's frame: learn_directions, then, once the limb has a last whole output, swivel_fill (counted
-    into out[0]). Arguments as swivel_fill's."""
-    positions, frames, status = skeleton
-    learn_directions(positions, frames, status, chain[0], state[2], state[3], state[4])
-    if last[3][0]:
-        out[0] += swivel_fill(skeleton, chain, last, state, steer)
-
-
-@njit(cache=True)
 def swivel_fill(skeleton, chain, last, state, steer):
     """Fill every run of missing joints that has a located joint on both sides; returns how many.
     ``skeleton``: (positions, frames, status) of the whole skeleton; ``chain``: the limb's (joints, parent);
@@ -354,14 +344,6 @@ def swivel_fill(skeleton, chain, last, state, steer):
         filled += _fill_run(skeleton, idx, (k - 1, k, b), parent_now, last, state, steer)
         k = b + 1
     return filled
-
-
-@njit(cache=True)
-def carry(positions, frames, status, idx, carried, prev_pos, prev_frames, out):
-    """The segment carry's frame: segment_carry, then carry_lost_end, counted into out[0] (estimated) and out[1]
-    (held)."""
-    out[0] += segment_carry(positions, frames, status, idx, carried, prev_pos, prev_frames)
-    out[1] += carry_lost_end(positions, frames, status, idx, prev_pos, prev_frames)
 
 
 @njit(cache=True)

@@ -172,12 +172,15 @@ class BlendState:
         """The time since the last frame (FrameClock.advance)."""
         self.clock.advance(time_s)
 
-    def blend(self, positions, status, idx, frames) -> None:
-        """One frame of the limb's joints ``idx`` and their bone ``frames`` (arrays of the whole skeleton), in place
-        (blend_step)."""
+    def blend(self, positions, status, idx, frames=None) -> None:
+        """One frame of the limb's joints ``idx`` (arrays of the whole skeleton), in place; ``frames``, the bone
+        frames, are blended too where given (blend_frames, with the spring's half-life)."""
         # (plain tuples: numba reads a NamedTuple of twenty arrays from Python microseconds slower than a tuple)
-        blend_step(positions, frames, status, idx, self._memory, (self.last_frame, self.turn_axis, self.turn),
-                   self.step, self.omega, self.frame_s, self.course_on)
+        m = self.memory
+        if frames is not None and self.omega > 0:  # (before blend_transitions, which moves last_status on)
+            blend_frames(frames, status, idx, m.last_status, m.has_last, (self.last_frame, self.turn_axis, self.turn),
+                         self.omega, self.frame_s)
+        blend_transitions(positions, status, idx, self._memory, self.step, self.omega, self.frame_s, self.course_on)
 
 
 class Blend(LimbFill):
@@ -207,16 +210,6 @@ def spring_step(x, v, omega, dt, decay):
     ``dt``; ``decay`` = exp(-omega dt)): the new (x, v). For a number or a vector."""
     spring = v + omega * x
     return decay * (x + spring * dt), decay * (v - spring * omega * dt)
-
-
-@njit(cache=True)
-def blend_step(positions, frames, status, idx, memory, turning, step, omega, dt, course_on):
-    """One frame of the limb's joints, in place: the bone frames (blend_frames, with the spring's half-life), then
-    the positions (blend_transitions). ``memory``: BlendMemory as a plain tuple; ``turning``: BlendState's
-    (last_frame, turn_axis, turn)."""
-    if omega > 0:  # (before blend_transitions, which moves last_status on)
-        blend_frames(frames, status, idx, memory[6], memory[7], turning, omega, dt)
-    blend_transitions(positions, status, idx, memory, step, omega, dt, course_on)
 
 
 @njit(cache=True)

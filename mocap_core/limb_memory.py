@@ -54,16 +54,10 @@ class LimbMemory(LimbFill):
 
     def before(self, frame: LimbFrame) -> None:
         """Learn this frame's pose, and hand the swivel where the poses learned put the lost joints."""
-        _learn_and_recall(frame.skeleton, self.limb.joints, self.other, self.limb.parent_of_root, self._rings,
-                          self.pred)
+        idx, parent = self.limb.joints, self.limb.parent_of_root
+        _learn(frame.skeleton, idx, self.other, parent, self._rings)
+        _recall(frame.skeleton, idx, parent, self._rings, self.pred)
         frame.recalled = self.pred
-
-
-@njit(cache=True)
-def _learn_and_recall(skeleton, idx, other, parent, rings, pred):
-    """The frame's pose kept (_learn), then the lost joints recalled into ``pred`` (_recall): one call a frame."""
-    _learn(skeleton, idx, other, parent, rings)
-    _recall(skeleton, idx, parent, rings, pred)
 
 
 @njit(cache=True)

@@ -25,5 +25,6 @@ class SegmentCarry(LimbFill):
     def before(self, frame: LimbFrame) -> None:
         limb = self.limb
         if limb.has_prev[0]:
-            af.carry(frame.positions, frame.frames, frame.status, limb.joints, self.carried, limb.prev_pos,
-                     limb.prev_frames, frame.out)
+            p, f, s = frame.positions, frame.frames, frame.status
+            frame.out[0] += af.segment_carry(p, f, s, limb.joints, self.carried, limb.prev_pos, limb.prev_frames)
+            frame.out[1] += af.carry_lost_end(p, f, s, limb.joints, limb.prev_pos, limb.prev_frames)

@@ -26,5 +26,8 @@ class Swivel(LimbFill):
 
     def before(self, frame: LimbFrame) -> None:
         limb = self.limb
-        af.swivel_step(frame.skeleton, limb.chain, limb.last, self._state,
-                       (frame.recalled, frame.modelled, frame.model_weight), frame.out)
+        af.learn_directions(frame.positions, frame.frames, frame.status, limb.joints, self.dir_sum, self.dir_sq,
+                            self.dir_n)
+        if limb.has_prev[0]:
+            frame.out[0] += af.swivel_fill(frame.skeleton, limb.chain, limb.last,
+                                           self._state, (frame.recalled, frame.modelled, frame.model_weight))
