@@ -25,7 +25,7 @@ class Node:
     subscribes: ClassVar[dict[str, type[Message]]] = {}   # logical topic -> message type
     publishes: ClassVar[dict[str, type[Message]]] = {}
     is_source: ClassVar[bool] = False                     # sources wait for the launcher's "start"
-    timer_period_s: ClassVar[float | None] = None         # call on_timer() this often (e.g. join timeouts)
+    timer_period_s: ClassVar[float | None] = None         # call on_timer() this often (to the next whole ms)
     drain_on_stop: ClassVar[bool] = False                 # handle frames already queued when stopped
     # Forward bytes without reading them (a relay): the runtime checks only each message's header
     # (schema, version, sequence, as ROS 2's topic_tools relay reads none of its messages) and calls
