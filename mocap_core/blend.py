@@ -334,7 +334,9 @@ def _spring_blend(p, s, was, k, mem, cfg, decay, neighbours, scratch):
         mem.raw_vel, mem.prev_raw, mem.prev_vel
     step, omega, dt = cfg.step, cfg.omega, cfg.dt
     kind = 0 if s == LOCATED else 1
-    raw, heading, before_raw, before_step, before, last_step = scratch
+    # (rows by index: unpacked, they would be typed as any layout, and compile their callees once more)
+    raw, heading, before_raw, before_step, before, last_step = (scratch[0], scratch[1], scratch[2], scratch[3],
+                                                                scratch[4], scratch[5])
     raw[:] = p
     for e in range(3):
         heading[e] = last_raw[k, e] + raw_vel[k, e]  # where the source was heading
