@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from mocap_core.ik.kernels import vdist
 from mocap_core.world import MAX_COORDINATE_M
 
 
@@ -94,7 +95,7 @@ def _screen(x, state, time_s, limits, drop):
             middle[c] = np.median(column)
         for i in range(m):
             if near[i]:
-                near[i] = _distance(x[i], middle) <= max_body
+                near[i] = vdist(x[i], middle) <= max_body
     dropped = 0
     for i in range(m):
         if not seen[i]:
@@ -116,14 +117,8 @@ def _screen(x, state, time_s, limits, drop):
 
 
 @njit(cache=True, inline="always")
-def _distance(a, b):
-    d0, d1, d2 = a[0] - b[0], a[1] - b[1], a[2] - b[2]
-    return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-
-
-@njit(cache=True, inline="always")
 def _reachable(x, before, before_t, time_s, max_speed, unknown):
     """Whether a marker is within ``max_speed`` of where it was at ``before_t``; ``unknown`` where it was nowhere."""
     if not np.isfinite(before_t):
         return unknown
-    return _distance(x, before) <= max_speed * (time_s - before_t)
+    return vdist(x, before) <= max_speed * (time_s - before_t)
