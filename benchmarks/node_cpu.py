@@ -1,7 +1,8 @@
 """Where a frame's CPU goes, per node kind (not run in CI): the studio graph, one process per node, fed by the QTM
-emulator; each node's CPU a frame split into the runtime's own loop (receive, decode, statistics, encode, send) and
-the node's algorithm (its handler, publishing excluded), with MOCAP_CPU_SPLIT=1; the graph's memory; and, in the
-same run, a bare pyzmq relay chain's CPU a frame per process (receive and send the bytes, nothing else).
+emulator; each node's CPU a frame split into the runtime's own loop (receive, decode, statistics, encode, send; its
+publishing, encoding and sending, also shown apart) and the node's algorithm (its handler, publishing excluded), with
+MOCAP_CPU_SPLIT=1; the graph's memory; and, in the same run, a bare pyzmq relay chain's CPU a frame per process
+(receive and send the bytes, nothing else).
 
     python benchmarks/node_cpu.py [--rate 500] [--seconds 60]
 
@@ -91,15 +92,16 @@ def main():
         handlers = end.cpu.handlers_s - start.cpu.handlers_s
         publishing = end.cpu.publishing_s - start.cpu.publishing_s
         algorithm = handlers - publishing
-        by_kind[end.kind].append((1e6 * (cpu - algorithm) / frames, 1e6 * algorithm / frames, 1e6 * cpu / frames))
+        by_kind[end.kind].append((1e6 * (cpu - algorithm) / frames, 1e6 * publishing / frames, 1e6 * algorithm / frames,
+                                  1e6 * cpu / frames))
     print(f"{args.rate:.0f} Hz from the QTM emulator, {args.seconds:.0f} s, one process per node; CPU a frame (us), "
           f"mean over the nodes of a kind:")
-    print(f"{'node kind':<20} {'nodes':>5} {'runtime':>8} {'algorithm':>10} {'whole':>7}")
+    print(f"{'node kind':<20} {'nodes':>5} {'runtime':>8} {'(publishing)':>13} {'algorithm':>10} {'whole':>7}")
     for kind, rows in sorted(by_kind.items()):
-        runtime, algorithm, whole = (sum(r[k] for r in rows) / len(rows) for k in range(3))
-        print(f"{kind:<20} {len(rows):>5} {runtime:>8.0f} {algorithm:>10.0f} {whole:>7.0f}")
-    print(f"{'bare pyzmq relay':<20} {HOPS + 1:>5} {bare_us:>8.0f} {0:>10.0f} {bare_us:>7.0f}   (the same run, "
-          f"{HOPS} hops at {args.rate:.0f} Hz: receive and send the bytes)")
+        runtime, publishing, algorithm, whole = (sum(r[k] for r in rows) / len(rows) for k in range(4))
+        print(f"{kind:<20} {len(rows):>5} {runtime:>8.0f} {publishing:>13.0f} {algorithm:>10.0f} {whole:>7.0f}")
+    print(f"{'bare pyzmq relay':<20} {HOPS + 1:>5} {bare_us:>8.0f} {'':>13} {0:>10.0f} {bare_us:>7.0f}   "
+          f"(the same run, {HOPS} hops at {args.rate:.0f} Hz: receive and send the bytes)")
     memory = samples["memory"]
     print(f"graph memory: {sum(v[1] for v in memory.values()):.0f} MB PSS over {len(memory)} processes (RSS summed, "
           f"shared pages counted once a process: {sum(v[0] for v in memory.values()):.0f} MB)")
