@@ -1,6 +1,7 @@
 """`mocap eval`: the thesis's experiments (chapter 4), and ours."""
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import logging
@@ -109,6 +110,9 @@ def add_parser(sub) -> None:
     lt.add_argument("--layout", choices=sorted(LAYOUTS), default="processes",
                     help="where the solving nodes run: a process each (default), one container "
                          "(launch/studio_composed.yaml) or two containers")
+    lt.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=True,
+                    help="the graph's node processes under real-time scheduling, as launch/qtm_studio.yaml runs them "
+                         "(--no-realtime: normal scheduling)")
     lt.add_argument("--fit", action="store_true",
                     help="solve with the rigid-skeleton fit (one skeleton_fit node, the subject calibrated from the "
                          "take first) instead of hip interpolation, localization and the five IK nodes")
@@ -391,6 +395,7 @@ def run_latency(args) -> int:
     try:
         lf = live_graph(port, args.profile, solved, f"latency-{int(time.time())}",
                         layout=args.layout, subject=subject)
+        lf.realtime = args.realtime
         Launcher(lf).run(duration_s=args.seconds)
     finally:
         sim.send_signal(signal.SIGINT)
@@ -407,6 +412,7 @@ def run_latency(args) -> int:
     layout = {"processes": "one process per node", "one": "solving nodes in one container",
               "two": "solving nodes in two containers"}[args.layout]
     layout += ", the rigid-skeleton fit" if args.fit else ""
+    layout += ", real-time scheduling" if args.realtime else ", normal scheduling"
     md = [f"Full graph ({layout}) fed by the QTM emulator at {args.rate:.0f} Hz for {args.seconds:.0f} s "
           f"({frames_out} frames out of skeleton/solved); latency from entering qtm_ingest to leaving retarget, ms.", "",
           "| chain | hops | p50 | p99 | max | dropped (last hop) | capture frames missing |",
@@ -419,7 +425,7 @@ def run_latency(args) -> int:
     out = Path(args.report)
     out.mkdir(parents=True, exist_ok=True)
     name = (f"latency_{args.rate:.0f}hz{'' if args.layout == 'processes' else '_' + args.layout}"
-            f"{'_fit' if args.fit else ''}")
+            f"{'_fit' if args.fit else ''}{'' if args.realtime else '_normal'}")
     (out / f"{name}.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     return 0

@@ -78,6 +78,8 @@ class LaunchFile(BaseModel):
                                               "labels' prefix), each with its own NODE.PARAM values if it needs them")
     hosts: dict[str, str] = Field(default_factory=dict, description="machines by name: the address each binds "
                                   "its nodes' tcp endpoints on and the others connect to")
+    realtime: bool = Field(False, description="run the node processes under the SCHED_RR real-time policy, so a busy "
+                           "machine delays no frame (needs an rtprio limit or CAP_SYS_NICE; docs/graph.md)")
     nodes: list[NodeEntry]
 
     @field_validator("actors", mode="before")

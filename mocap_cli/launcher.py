@@ -35,6 +35,7 @@ from mocap_cli.graph_registry import registry_path, write_registry
 from mocap_cli.launch_file import LaunchError, LaunchFile, NodeEntry
 from mocap_core.warmup import PARTS, ensure_compiled
 from nodes import forkserver
+from nodes.priority import REALTIME_PRIORITY, is_realtime
 from nodes.registry import UnknownKind, load_kind
 from nodes.runtime import DIAGNOSTICS, inproc_endpoint
 from nodes.spec import NodeSpec
@@ -164,7 +165,7 @@ def _node_procs(lf: LaunchFile, entry: NodeEntry, namespace: str, cls, sock_dir:
                         namespace=namespace, pub_endpoint=endpoint, control_endpoint=control_endpoint,
                         replica=k, replicas=entry.replicas, hwm=entry.hwm, keep_last=entry.keep_last,
                         curve_keys=str(Path(lf.transport.curve_keys).resolve()) if lf.transport.curve_keys
-                        else None)
+                        else None, realtime=lf.realtime)
         out.append(Proc(spec=spec, is_source=cls.is_source, respawn=entry.respawn, container=entry.container,
                         host=entry.host, kernels=cls.kernels(params),
                         publishes=[spec.wire_topic(t) for t in outputs] + [DIAGNOSTICS],
@@ -284,11 +285,25 @@ class Launcher:
             return
         self.graph_started = True
         log.info("graph %s ready in %.0f ms: starting sources", self.lf.name, (now - self.t0) * 1000)
+        if self.lf.realtime:
+            self._say_realtime()
         if self.on_ready is not None:
             self.on_ready()
         for n in self.procs:
             if n.is_source and n.identity:
                 self.control.send_multipart([n.identity, b"start"])
+
+    def _say_realtime(self) -> None:
+        """Whether the node processes got the real-time scheduling the launch file asked for: said once."""
+        running = [p for p in self.processes if p.os_process is not None and p.os_process.exitcode is None]
+        normal = [p.name for p in running if not is_realtime(p.os_process.pid)]
+        if not normal:
+            log.info("realtime: %d node processes under SCHED_RR, priority %d", len(running), REALTIME_PRIORITY)
+            return
+        log.warning("realtime: %d of %d node processes run at normal priority (%s): this user may not use real-time "
+                    "scheduling. Allow it with an rtprio limit (`ulimit -r %d`, or a line in "
+                    "/etc/security/limits.conf) or CAP_SYS_NICE; until then a busy machine can delay frames",
+                    len(normal), len(running), ", ".join(normal), REALTIME_PRIORITY)
 
     def _watch(self, now: float) -> None:
         for p in self.processes:

@@ -9,6 +9,7 @@ import os
 import signal
 import sys
 
+from nodes.priority import use_realtime
 from nodes.registry import load_kind
 from nodes.runtime import configure_logging, run_nodes
 from nodes.spec import NodeSpec
@@ -35,6 +36,14 @@ def main(argv: list[str] | None = None) -> int:
     _die_with_parent()
     nodes = [(spec, load_kind(spec.kind)) for spec in parse_specs(argv[0])]
     configure_logging(os.environ.get("MOCAP_LOG_LEVEL", "INFO"))
+    if any(spec.realtime for spec, _ in nodes):  # before any thread starts (zmq's I/O thread inherits it)
+        why = use_realtime()
+        if why:  # (a launcher says it once for its whole graph)
+            launched = nodes[0][0].control_endpoint is not None
+            logging.getLogger(f"mocap.{nodes[0][0].id}").log(
+                logging.DEBUG if launched else logging.WARNING,
+                "realtime: runs at normal priority (%s); allow real-time scheduling with an rtprio limit or "
+                "CAP_SYS_NICE (docs/graph.md)", why)
     profile_dir = os.environ.get("MOCAP_PROFILE_DIR")
     if profile_dir:  # developers: one cProfile file per node, read with `python -m pstats FILE`
         import cProfile

@@ -27,6 +27,7 @@ class NodeSpec(BaseModel):
     hwm: int = Field(1000, description="ZeroMQ high-water mark: queued messages per peer before drops")
     curve_keys: str | None = None             # directory of CURVE keys (nodes/curve.py); None = plain
     restart: int = 0                          # the launcher's restarts of it so far (a sink appends after the first)
+    realtime: bool = False                    # run its process under SCHED_RR (nodes.priority)
 
     def wire_topic(self, logical: str) -> str:
         """Remap, then prefix the namespace unless the name is absolute ("/x") or ``diagnostics`` (as in ROS)."""

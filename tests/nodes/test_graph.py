@@ -4,7 +4,7 @@ import signal
 
 import pytest
 
-from tests.conftest import launched, log_rows, pid_alive, wait_for
+from tests.conftest import REPO, launched, log_rows, pid_alive, wait_for
 
 SMOKE = """
 nodes:
@@ -176,3 +176,49 @@ def test_heartbeats_split_a_nodes_cpu_between_its_handlers_and_the_runtime(tmp_p
         wait_for(lambda: out.exists() and len(read_frames(out)) > 100, 15, "frames through the graph")
         cpu = g.heartbeats(1.5)["relay"].cpu
     assert cpu.process_s > cpu.handlers_s > cpu.publishing_s > 0, cpu
+
+
+def _may_use_realtime() -> bool:
+    import resource
+
+    from nodes.priority import REALTIME_PRIORITY
+
+    return os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= REALTIME_PRIORITY
+
+
+def test_a_realtime_graph_runs_every_node_thread_under_sched_rr_restarts_included(tmp_path):
+    # (launch/qtm_studio.yaml and the other studio files say realtime: true; where this user may not, the graph
+    # runs at normal priority and the launcher says how to allow it)
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, "realtime: true\n" + SMOKE.format(rate=200, frames=0, log=out)) as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 20, 15, "frames through the graph")
+        wait_for(lambda: "realtime:" in g.log(), 5, "the launcher's word on real-time scheduling")
+        os.kill(g.node_pids()["relay"], signal.SIGKILL)
+        old = set(g.node_pids().values())
+        wait_for(lambda: g.node_pids().get("relay") not in old, 5, "a restarted relay")
+        n = len(read_frames(out))
+        wait_for(lambda: len(read_frames(out)) > n + 20, 5, "frames after the restart")
+        threads = [int(t) for pid in g.node_pids().values() for t in os.listdir(f"/proc/{pid}/task")]
+        policies = {os.sched_getscheduler(t) for t in threads}
+    assert len(threads) >= 6  # each node's own thread and zmq's I/O thread
+    if _may_use_realtime():
+        assert policies == {os.SCHED_RR}, policies
+        assert "realtime: 3 node processes under SCHED_RR, priority 10" in g.log()
+    else:
+        assert policies == {os.SCHED_OTHER}, policies
+        assert "run at normal priority" in g.log() and "rtprio" in g.log()
+
+
+def test_realtime_scheduling_refused_is_a_reason_not_a_failure():
+    # A user without an rtprio limit or CAP_SYS_NICE (here: root turned into nobody, which drops both)
+    import subprocess
+    import sys
+
+    code = ("import os, resource\nfrom nodes.priority import use_realtime\n"
+            "resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))\n"
+            "if os.geteuid() == 0:\n    os.setgid(65534); os.setuid(65534)\n"
+            "print(repr(use_realtime())); print(os.sched_getscheduler(0) == os.SCHED_OTHER)")
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    reason, normal = done.stdout.split("\n")[:2]
+    assert "PermissionError" in reason and normal == "True", done.stdout
