@@ -95,7 +95,7 @@ def main() -> None:
         t = first_demo(clone, python)
         print(f"run {run + 1}: " + (f"install {install_s:.0f} s, then " if install_s is not None else "")
               + f"compile {t['compile_s']:.0f} s, viewer serving at {t['viewer_s']:.0f} s, "
-              f"skeleton moving at {t['moving_s']:.0f} s (target 90 s)", flush=True)
+              f"skeleton moving at {t['moving_s']:.0f} s (target 60 s)", flush=True)
         shutil.rmtree(work, ignore_errors=True)
 
 
