@@ -1,6 +1,7 @@
 """`mocap demo`: the whole graph on a built-in take, with the live viewer, then a short summary."""
 from __future__ import annotations
 
+import argparse
 import csv
 import logging
 import tempfile
@@ -28,6 +29,8 @@ def add_parser(sub) -> None:
     s.add_argument("--once", action="store_true", help="one pass of the take, then stop")
     s.add_argument("--seconds", type=float, help="stop after this many seconds")
     s.add_argument("--port", type=int, default=8090, help="viewer port (default 8090)")
+    s.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
+                   help="the nodes under real-time scheduling, or not (--no-realtime), whatever the file says")
     s.set_defaults(func=run)
 
 
@@ -37,6 +40,8 @@ def run(args) -> int:
     overrides += [] if args.once else ["source.loop=true"]
     lf = load_launch_file(args.launch, overrides)
     lf.name = "demo"
+    if args.realtime is not None:
+        lf.realtime = args.realtime
 
     def serving():  # said when the viewer serves, not before a first run's compile
         print(f"\nviewer: http://127.0.0.1:{args.port}/   (Ctrl-C stops the graph)\n", flush=True)

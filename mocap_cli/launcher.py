@@ -302,7 +302,8 @@ class Launcher:
             return
         log.warning("realtime: %d of %d node processes run at normal priority (%s): this user may not use real-time "
                     "scheduling. Allow it with an rtprio limit (`ulimit -r %d`, or a line in "
-                    "/etc/security/limits.conf) or CAP_SYS_NICE; until then a busy machine can delay frames",
+                    "/etc/security/limits.conf) or CAP_SYS_NICE; until then a busy machine can delay frames "
+                    "(--no-realtime: run at normal priority without this warning)",
                     len(normal), len(running), ", ".join(normal), REALTIME_PRIORITY)
 
     def _watch(self, now: float) -> None:

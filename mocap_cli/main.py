@@ -25,6 +25,8 @@ def cmd_launch(args) -> int:
     if args.plan:
         print(dump_plan(lf))
         return 0
+    if args.realtime is not None:
+        lf.realtime = args.realtime
     if args.name:
         lf.name = args.name
     elif args.host:
@@ -96,6 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plan", action="store_true", help="print each process's spec (endpoints, wiring) and exit")
     s.add_argument("--host", help="run the nodes of this machine (a name in the file's hosts:); without it, the "
                                   "nodes with no host:")
+    s.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
+                   help="the nodes under real-time scheduling, or not (--no-realtime), whatever the file says")
     s.set_defaults(func=cmd_launch)
 
     s = sub.add_parser("topic", help="inspect topics of a running graph")

@@ -209,6 +209,15 @@ def test_a_realtime_graph_runs_every_node_thread_under_sched_rr_restarts_include
         assert "run at normal priority" in g.log() and "rtprio" in g.log()
 
 
+def test_no_realtime_on_the_command_line_runs_a_realtime_file_at_normal_priority(tmp_path):
+    out = tmp_path / "frames.csv"
+    with launched(tmp_path, "realtime: true\n" + SMOKE.format(rate=200, frames=0, log=out), "--no-realtime") as g:
+        wait_for(lambda: out.exists() and len(read_frames(out)) > 20, 15, "frames through the graph")
+        policies = {os.sched_getscheduler(pid) for pid in g.node_pids().values()}
+    assert policies == {os.SCHED_OTHER}, policies
+    assert "realtime:" not in g.log()
+
+
 def test_realtime_scheduling_refused_is_a_reason_not_a_failure():
     # A user without an rtprio limit or CAP_SYS_NICE (here: root turned into nobody, which drops both)
     import subprocess
