@@ -1,7 +1,6 @@
 """`mocap demo`: the whole graph on a built-in take, with the live viewer, then a short summary."""
 from __future__ import annotations
 
-import argparse
 import csv
 import logging
 import tempfile
@@ -9,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocap_cli.launch_file import load_launch_file
+from mocap_cli.launch_file import add_realtime_flag, load_launch_file
 from mocap_cli.launcher import Launcher
 
 REPO = Path(__file__).resolve().parents[1]
@@ -29,8 +28,7 @@ def add_parser(sub) -> None:
     s.add_argument("--once", action="store_true", help="one pass of the take, then stop")
     s.add_argument("--seconds", type=float, help="stop after this many seconds")
     s.add_argument("--port", type=int, default=8090, help="viewer port (default 8090)")
-    s.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
-                   help="the nodes under real-time scheduling, or not (--no-realtime), whatever the file says")
+    add_realtime_flag(s)
     s.set_defaults(func=run)
 
 

@@ -19,6 +19,7 @@ nodes:
 """
 from __future__ import annotations
 
+import argparse
 import re
 from pathlib import Path
 from typing import Any, Literal
@@ -221,6 +222,12 @@ def _is_param(node: dict, name: str) -> bool:
         return name in load_kind(str(node.get("kind"))).Params.model_fields
     except UnknownKind:
         return False
+
+
+def add_realtime_flag(parser: argparse.ArgumentParser) -> None:
+    """``--realtime`` / ``--no-realtime``: over the launch file's ``realtime:`` (None: as the file says)."""
+    parser.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
+                        help="the nodes under real-time scheduling, or not (--no-realtime), whatever the file says")
 
 
 def load_launch_file(path: str | Path, overrides: list[str] = ()) -> LaunchFile:

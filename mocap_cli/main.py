@@ -14,7 +14,7 @@ from mocap_core.profiles import ProfileError
 from mocap_core.recordings import RecordingError
 from mocap_cli.graph_registry import NoGraph, RegistryError, find_graph, running_graphs
 from nodes.bags import BagError
-from mocap_cli.launch_file import LaunchError, load_launch_file
+from mocap_cli.launch_file import LaunchError, add_realtime_flag, load_launch_file
 from nodes.runtime import configure_logging
 
 
@@ -98,8 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plan", action="store_true", help="print each process's spec (endpoints, wiring) and exit")
     s.add_argument("--host", help="run the nodes of this machine (a name in the file's hosts:); without it, the "
                                   "nodes with no host:")
-    s.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
-                   help="the nodes under real-time scheduling, or not (--no-realtime), whatever the file says")
+    add_realtime_flag(s)
     s.set_defaults(func=cmd_launch)
 
     s = sub.add_parser("topic", help="inspect topics of a running graph")

@@ -24,8 +24,6 @@ above it follow, where the fills had only the joints to go by.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
@@ -236,7 +234,7 @@ def rigid_fit(skeleton, idx, parent, end_site, offsets, rest):
             for k in range(i + 1, m):
                 for e in range(3):
                     want[e] += w[k] * (T[k, e] - P[k, e] + L[i] * U[i, e])
-            size = math.sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2])
+            size = vnorm(want)
             if size < 1e-12:
                 continue
             for e in range(3):

@@ -16,7 +16,7 @@ def use_realtime() -> str:
     """Put this process (and the threads it starts from now on) under SCHED_RR; "" when done, else why not."""
     try:
         os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REALTIME_PRIORITY))
-    except (PermissionError, OSError) as e:
+    except OSError as e:  # (PermissionError without the privilege)
         return f"{type(e).__name__}: {e.strerror or e}"
     return ""
 
